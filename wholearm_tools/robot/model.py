@@ -1,0 +1,268 @@
+"""Serial chains of revolute joints with capsule links: kinematics and point velocities.
+
+Geometry convention (one place): joint ``i`` (0-based) sits at the origin of frame ``i``; link
+``i`` is the segment from joint ``i`` to joint ``i + 1`` (for the last link: to the tip point),
+a capsule of radius ``link_radii[i]`` (cylinder plus a sphere at each end).  The tip is a sphere
+of radius ``tip_radius`` centred on the tip point (0 = sharp tip: contacts at the end of the last
+link then have radius ``link_radii[-1]``).  Link ``i`` moves with joints ``0..i`` only, which is
+what makes link identification possible.
+
+All frames are expressed in the base frame ``base_link``.  Transforms are 4x4 homogeneous
+matrices named ``A2B`` style where needed; ``frames(q)`` returns ``joint_i -> base``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from wholearm_tools.errors import InputError, RobotModelError
+
+FloatArray = NDArray[np.float64]
+
+
+def _readonly(arr: ArrayLike) -> FloatArray:
+    out = np.array(arr, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+def rotation_about_axis(axis: FloatArray, angle: FloatArray) -> FloatArray:
+    """Rodrigues rotation matrices for a unit ``axis (3,)`` and ``angle (...)`` → ``(..., 3, 3)``."""
+    x, y, z = axis
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    angle = np.asarray(angle, dtype=float)[..., None, None]
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def transform_from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike = (0.0, 0.0, 0.0)) -> FloatArray:
+    """URDF origin (translation, roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)) → 4x4 matrix."""
+    from scipy.spatial.transform import Rotation
+
+    tf = np.eye(4)
+    tf[:3, :3] = Rotation.from_euler("xyz", np.asarray(rpy, dtype=float)).as_matrix()
+    tf[:3, 3] = np.asarray(xyz, dtype=float)
+    return tf
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RobotModel:
+    """A serial chain of ``n`` revolute joints with capsule links and a spherical tip.
+
+    Parameters
+    ----------
+    name : str
+    joint_names : tuple of n str
+    origins : (n, 4, 4) float
+        Fixed transform of joint ``i``'s frame in the frame of link ``i - 1`` (base for i = 0),
+        before the joint rotation.
+    axes : (n, 3) float
+        Unit rotation axis of each joint in its own frame.
+    tip_offset : (3,) float
+        Tip point in the frame of the last joint.
+    link_radii : (n,) float
+        Capsule radius ``w`` of each link.
+    tip_radius : float
+        Radius of the tip sphere (0 for a sharp tip).
+    lower, upper : (n,) float
+        Joint limits in radians.
+    velocity_limits, effort_limits : (n,) float
+    """
+
+    name: str
+    joint_names: tuple[str, ...]
+    origins: FloatArray
+    axes: FloatArray
+    tip_offset: FloatArray
+    link_radii: FloatArray
+    tip_radius: float
+    lower: FloatArray
+    upper: FloatArray
+    velocity_limits: FloatArray
+    effort_limits: FloatArray
+    planar: bool = field(init=False)
+
+    def __post_init__(self) -> None:
+        n = len(self.joint_names)
+        if n == 0:
+            raise RobotModelError(f"robot {self.name!r} has no revolute joints")
+        if len(set(self.joint_names)) != n:
+            raise RobotModelError(f"robot {self.name!r} has duplicate joint names")
+        checks = {
+            "origins": (n, 4, 4), "axes": (n, 3), "tip_offset": (3,), "link_radii": (n,),
+            "lower": (n,), "upper": (n,), "velocity_limits": (n,), "effort_limits": (n,),
+        }
+        for attr, shape in checks.items():
+            value = np.asarray(getattr(self, attr), dtype=float)
+            if value.shape != shape:
+                raise RobotModelError(f"expected {attr} of shape {shape}, got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise RobotModelError(f"robot {self.name!r}: {attr} has non-finite values")
+            if attr == "axes":
+                norms = np.linalg.norm(value, axis=1)
+                if np.any(norms < 1e-9):
+                    raise RobotModelError(f"robot {self.name!r}: a joint axis is zero")
+                value = value / norms[:, None]
+            object.__setattr__(self, attr, _readonly(value))
+        if np.any(self.link_radii < 0) or self.tip_radius < 0:
+            raise RobotModelError(f"robot {self.name!r}: negative link or tip radius")
+        if np.any(self.lower >= self.upper):
+            raise RobotModelError(f"robot {self.name!r}: a joint has lower limit >= upper limit")
+        object.__setattr__(self, "tip_radius", float(self.tip_radius))
+        object.__setattr__(self, "planar", self._is_planar())
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_spec(cls, spec: dict[str, Any], name: str = "robot") -> RobotModel:
+        """Build a robot from a scenario's ``robot:`` mapping.
+
+        ``spec = {"joints": [{"name", "origin": [x, y, z], "rpy": [r, p, y], "axis": [x, y, z],
+        "limits": [lo, hi], "radius": w, "velocity": v, "effort": e}, ...],
+        "tip": {"offset": [x, y, z], "radius": w_tip}}`` — ``rpy``, ``axis`` (default z),
+        ``limits`` (default ±pi), ``velocity`` (1 rad/s) and ``effort`` (10 N m) may be omitted.
+        """
+        try:
+            joints = spec["joints"]
+            tip = spec["tip"]
+            n = len(joints)
+            names = tuple(str(j.get("name", f"joint_{i + 1}")) for i, j in enumerate(joints))
+            origins = np.stack(
+                [transform_from_xyz_rpy(j.get("origin", [0, 0, 0]), j.get("rpy", [0, 0, 0]))
+                 for j in joints]
+            ) if n else np.zeros((0, 4, 4))
+            axes = np.array([j.get("axis", [0.0, 0.0, 1.0]) for j in joints], dtype=float)
+            limits = np.array([j.get("limits", [-np.pi, np.pi]) for j in joints], dtype=float)
+            return cls(
+                name=str(spec.get("name", name)),
+                joint_names=names,
+                origins=origins,
+                axes=axes.reshape(n, 3),
+                tip_offset=np.asarray(tip["offset"], dtype=float),
+                link_radii=np.array([j["radius"] for j in joints], dtype=float),
+                tip_radius=float(tip.get("radius", 0.0)),
+                lower=limits.reshape(n, 2)[:, 0],
+                upper=limits.reshape(n, 2)[:, 1],
+                velocity_limits=np.array([j.get("velocity", 1.0) for j in joints], dtype=float),
+                effort_limits=np.array([j.get("effort", 10.0) for j in joints], dtype=float),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, RobotModelError):
+                raise
+            raise RobotModelError(f"invalid robot description: {exc!r}") from None
+
+    def _is_planar(self) -> bool:
+        """True when every joint axis is the base z axis and every link lies in the z = 0 plane."""
+        z = np.array([0.0, 0.0, 1.0])
+        # tested on a few fixed configurations: cheap, and needs no special case for rpy origins
+        rng = np.random.default_rng(0)
+        q = rng.uniform(self.lower, self.upper, size=(4, self.dof))
+        frames = self.frames(q)
+        axes_world = np.einsum("...ij,...j->...i", frames[..., :3, :3], self.axes)
+        pts = self.joint_positions(q)
+        return bool(np.allclose(np.abs(axes_world @ z), 1.0, atol=1e-9)
+                    and np.allclose(pts[..., 2], 0.0, atol=1e-9))
+
+    # ------------------------------------------------------------------ kinematics
+    @property
+    def dof(self) -> int:
+        """Number of revolute joints ``n``."""
+        return len(self.joint_names)
+
+    @property
+    def dim(self) -> int:
+        """Workspace dimension: 2 for planar robots (xy plane), else 3."""
+        return 2 if self.planar else 3
+
+    def check_q(self, q: ArrayLike, name: str = "q") -> FloatArray:
+        """Validate joint values of shape ``(..., n)``."""
+        arr = np.asarray(q, dtype=float)
+        if arr.ndim == 0 or arr.shape[-1] != self.dof:
+            raise InputError(f"expected {name} of shape (..., {self.dof}), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{name} contains NaN or infinite values")
+        return arr
+
+    def frames(self, q: ArrayLike) -> FloatArray:
+        """World transforms of every joint frame after rotation, ``(..., n, 4, 4)``."""
+        q = self.check_q(q)
+        batch = q.shape[:-1]
+        out = np.empty(batch + (self.dof, 4, 4))
+        current = np.broadcast_to(np.eye(4), batch + (4, 4))
+        for i in range(self.dof):
+            local = np.broadcast_to(self.origins[i], batch + (4, 4)).copy()
+            local[..., :3, :3] = self.origins[i, :3, :3] @ rotation_about_axis(self.axes[i], q[..., i])
+            current = current @ local
+            out[..., i, :, :] = current
+        return out
+
+    def joint_positions(self, q: ArrayLike) -> FloatArray:
+        """Joint origins and the tip point, ``(..., n + 1, 3)``; link ``i`` spans rows i, i+1."""
+        frames = self.frames(q)
+        pts = np.empty(frames.shape[:-3] + (self.dof + 1, 3))
+        pts[..., : self.dof, :] = frames[..., :3, 3]
+        last = frames[..., -1, :, :]
+        pts[..., self.dof, :] = last[..., :3, :3] @ self.tip_offset + last[..., :3, 3]
+        return pts
+
+    def joint_axes(self, q: ArrayLike) -> FloatArray:
+        """Unit joint axes in the base frame, ``(..., n, 3)``."""
+        frames = self.frames(q)
+        return np.einsum("...ij,...j->...i", frames[..., :3, :3], self.axes)
+
+    def link_segments(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Start and end points of every link axis, each ``(..., n, 3)``."""
+        pts = self.joint_positions(q)
+        return pts[..., :-1, :], pts[..., 1:, :]
+
+    def tip_position(self, q: ArrayLike) -> FloatArray:
+        """Tip point, ``(..., 3)``."""
+        return self.joint_positions(q)[..., -1, :]
+
+    def point_velocities(
+        self, q: ArrayLike, qd: ArrayLike, link: ArrayLike, s: ArrayLike
+    ) -> FloatArray:
+        """Velocity of the point at fraction ``s`` along link ``link`` (broadcast), ``(..., 3)``.
+
+        ``q, qd : (..., n)``; ``link`` int and ``s`` float broadcast against the batch shape.
+        v = sum over joints j <= link of qd_j * (axis_j x (p - o_j)).
+        """
+        q = self.check_q(q)
+        qd = self.check_q(qd, "qd")
+        pts = self.joint_positions(q)
+        axes = self.joint_axes(q)
+        link = np.asarray(link, dtype=int)
+        s = np.asarray(s, dtype=float)
+        batch = np.broadcast_shapes(q.shape[:-1], link.shape, s.shape)
+        pts = np.broadcast_to(pts, batch + pts.shape[-2:])
+        axes = np.broadcast_to(axes, batch + axes.shape[-2:])
+        qd = np.broadcast_to(qd, batch + (self.dof,))
+        link = np.broadcast_to(link, batch)
+        s = np.broadcast_to(s, batch)
+        if np.any((link < 0) | (link >= self.dof)):
+            raise InputError(f"link index out of range 0..{self.dof - 1}")
+        a = np.take_along_axis(pts, link[..., None, None], axis=-2)[..., 0, :]
+        b = np.take_along_axis(pts, link[..., None, None] + 1, axis=-2)[..., 0, :]
+        p = a + s[..., None] * (b - a)
+        lever = p[..., None, :] - pts[..., :-1, :]
+        contrib = np.cross(axes, lever) * qd[..., None]
+        mask = np.arange(self.dof) <= link[..., None]
+        return np.sum(contrib * mask[..., None], axis=-2)
+
+    def contact_radius(self, link: int, tip: bool) -> float:
+        """Radius ``w`` for a contact on ``link``: tip/joint sphere if ``tip`` else link cylinder."""
+        if not tip:
+            return float(self.link_radii[link])
+        if link == self.dof - 1:
+            return max(self.tip_radius, float(self.link_radii[link]))
+        return float(max(self.link_radii[link], self.link_radii[link + 1]))
+
+    @property
+    def reach(self) -> float:
+        """Upper bound on the distance from the base to any point of the robot."""
+        lengths = np.linalg.norm(self.origins[1:, :3, 3], axis=1).sum() + np.linalg.norm(
+            self.tip_offset)
+        return float(np.linalg.norm(self.origins[0, :3, 3]) + lengths
+                     + max(self.tip_radius, float(self.link_radii.max())))
