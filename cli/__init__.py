@@ -1,0 +1,1 @@
+"""The ``wholearm`` command line: click commands only, over the public wholearm_tools API."""

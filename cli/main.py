@@ -1,0 +1,58 @@
+"""The ``wholearm`` click group.  Each command lives in its own module under ``cli/``."""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+
+import click
+
+from wholearm_tools import __version__
+
+#: command modules, each exposing a click command named ``command``
+COMMANDS = (
+    "cli.scenarios",
+    "cli.simulate",
+    "cli.inspect",
+)
+
+
+class WholearmGroup(click.Group):
+    """Click group that turns toolkit errors into one-line messages (never a traceback)."""
+
+    def invoke(self, ctx: click.Context):  # type: ignore[override]
+        from wholearm_tools.errors import WholearmError
+
+        try:
+            return super().invoke(ctx)
+        except WholearmError as exc:
+            raise click.ClickException(str(exc)) from None
+        except OSError as exc:  # e.g. unreadable input the command did not translate
+            raise click.ClickException(f"{exc.filename or ''}: {exc.strerror or exc}") from None
+
+
+@click.group(cls=WholearmGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="wholearm")
+@click.option("-v", "--verbose", count=True, help="More log output on stderr (repeatable).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
+def cli(verbose: int, quiet: bool) -> None:
+    """Whole-arm tactile exploration: simulate, inspect and reconstruct logged runs."""
+    level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
+                                         logging.INFO if verbose else logging.WARNING)
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr,
+                        force=True)
+    logging.captureWarnings(True)
+
+
+for _name in COMMANDS:
+    cli.add_command(importlib.import_module(_name).command)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    cli(prog_name="wholearm")
+
+
+if __name__ == "__main__":
+    main()

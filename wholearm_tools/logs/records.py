@@ -1,0 +1,152 @@
+"""Immutable records passed between stages: a joint log, ground truth, and a whole run.
+
+Arrays are columnar (one array per field) and read-only.  Times are seconds from the first
+message of the log (``t0_ns`` keeps the absolute start so exports can restore log time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.robot.model import RobotModel
+
+FloatArray = NDArray[np.float64]
+
+CONTACT_KINDS = ("tip", "joint", "body")
+"""Ground-truth contact location on a link: the tip sphere (last link), the outer joint sphere
+(inner links), or the link body (cylinder side)."""
+
+
+def _frozen(arr: Any, dtype: Any = float) -> NDArray[Any]:
+    out = np.array(arr, dtype=dtype)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class JointLog:
+    """Joint states of one arm, columnar, on the state timestamps.
+
+    Parameters
+    ----------
+    joint_names : tuple of n str
+    t : (N,) float, seconds since ``t0_ns``, strictly increasing
+    q : (N, n) float, measured joint positions [rad]
+    qd : (N, n) float, joint velocities [rad/s] (logged, or differentiated from ``q``)
+    tau_cmd : (N, n) float or None, commanded torques [N m] held onto the state timestamps
+    q_cmd : (N, n) float or None, commanded positions when the log has them
+    t0_ns : int, absolute time of ``t[0]`` in nanoseconds
+    """
+
+    joint_names: tuple[str, ...]
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    tau_cmd: FloatArray | None = None
+    q_cmd: FloatArray | None = None
+    t0_ns: int = 0
+
+    def __post_init__(self) -> None:
+        n = len(self.joint_names)
+        t = _frozen(self.t)
+        if t.ndim != 1:
+            raise InputError(f"expected t of shape (N,), got {t.shape}")
+        object.__setattr__(self, "t", t)
+        for name in ("q", "qd", "tau_cmd", "q_cmd"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = _frozen(value)
+            if arr.shape != (t.shape[0], n):
+                raise InputError(f"expected {name} of shape ({t.shape[0]}, {n}), got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "t0_ns", int(self.t0_ns))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n_samples else 0.0
+
+    @property
+    def rate(self) -> float:
+        """Median sample rate in Hz (0 for fewer than two samples)."""
+        if self.n_samples < 2:
+            return 0.0
+        return float(1.0 / np.median(np.diff(self.t)))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GroundTruth:
+    """What really happened in a simulated run (absent for real logs).
+
+    Parameters
+    ----------
+    surfaces : tuple of dict
+        Environment surfaces as JSON-ready dicts: ``{"id": int, "type": str, "params": {...},
+        "free_side": +1|-1, "bounds": {...}}`` (see ``wholearm_tools.sim.environment``).
+    contact_t : (M,) float, contact times (seconds, same clock as ``JointLog.t``)
+    contact_link : (M,) int, 0-based link index in contact
+    contact_kind : (M,) str, one of :data:`CONTACT_KINDS`
+    contact_point : (M, 3) float, contact point on the surface (base frame)
+    contact_surface : (M,) int, surface id touched
+    contact_s : (M,) float, fraction along the link axis of the robot point in contact
+    meta : dict, scenario name, seed, B hint, anything else JSON-serialisable
+    """
+
+    surfaces: tuple[dict[str, Any], ...]
+    contact_t: FloatArray
+    contact_link: NDArray[np.int64]
+    contact_kind: NDArray[np.str_]
+    contact_point: FloatArray
+    contact_surface: NDArray[np.int64]
+    contact_s: FloatArray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        m = np.asarray(self.contact_t).shape[0]
+        object.__setattr__(self, "contact_t", _frozen(self.contact_t))
+        object.__setattr__(self, "contact_link", _frozen(self.contact_link, np.int64))
+        object.__setattr__(self, "contact_kind", _frozen(self.contact_kind, np.str_))
+        object.__setattr__(self, "contact_point", _frozen(self.contact_point).reshape(m, 3))
+        object.__setattr__(self, "contact_surface", _frozen(self.contact_surface, np.int64))
+        object.__setattr__(self, "contact_s", _frozen(self.contact_s))
+        for name in ("contact_link", "contact_kind", "contact_surface", "contact_s"):
+            if getattr(self, name).shape != (m,):
+                raise InputError(f"expected {name} of shape ({m},), got "
+                                 f"{getattr(self, name).shape}")
+        bad = set(self.contact_kind.tolist()) - set(CONTACT_KINDS)
+        if bad:
+            raise InputError(f"unknown contact kinds {sorted(bad)}; expected {CONTACT_KINDS}")
+        object.__setattr__(self, "surfaces", tuple(self.surfaces))
+
+    @property
+    def n_contacts(self) -> int:
+        return int(self.contact_t.shape[0])
+
+    @property
+    def is_tip(self) -> NDArray[np.bool_]:
+        """True where the contact is on the tip or a joint sphere (the paper's "tip" class)."""
+        return self.contact_kind != "body"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Run:
+    """A logged run: robot, joint log, optional ground truth, and where it came from."""
+
+    robot: RobotModel
+    log: JointLog
+    truth: GroundTruth | None = None
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        if tuple(self.log.joint_names) != tuple(self.robot.joint_names):
+            raise InputError(f"{self.source}: log joints {self.log.joint_names} do not match "
+                             f"robot joints {self.robot.joint_names}")
