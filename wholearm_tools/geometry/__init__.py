@@ -1,1 +1,44 @@
-"""geometry"""
+"""Geometric primitives: exact signed distances, gradients, closest points, segment and capsule
+clearances, and bounded obstacles for simulated environments.
+
+Sign convention (see :mod:`wholearm_tools.geometry.base`): negative inside closed shapes,
+positive on the normal side of lines and planes; ``clearance = free_side * signed_distance``.
+"""
+
+from wholearm_tools.geometry.base import (
+    PRIMITIVE_TYPES,
+    Primitive,
+    as_points,
+    primitive_from_dict,
+    primitive_to_dict,
+    primitive_type,
+    register,
+)
+from wholearm_tools.geometry.primitives import (
+    Circle2D,
+    Cone,
+    Cylinder,
+    Line2D,
+    Plane,
+    Sphere,
+    Torus,
+    capsule_clearance,
+)
+
+__all__ = [
+    "PRIMITIVE_TYPES",
+    "Circle2D",
+    "Cone",
+    "Cylinder",
+    "Line2D",
+    "Plane",
+    "Primitive",
+    "Sphere",
+    "Torus",
+    "as_points",
+    "capsule_clearance",
+    "primitive_from_dict",
+    "primitive_to_dict",
+    "primitive_type",
+    "register",
+]
