@@ -1,0 +1,135 @@
+"""Contact detection on tiny hand-built joint logs: one-stage, two-stage, noisy 50 Hz, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wholearm_tools.contacts import Contacts, DetectionParams, detect_contacts
+from wholearm_tools.errors import InputError
+from wholearm_tools.logs.records import JointLog
+
+
+def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_noise=0.003,
+                  differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8):
+    """A guarded-move impedance log: ``moves`` = list of (target (n,), {joint: block_time}).
+
+    Each move drives the commanded position toward ``target`` at ``speed`` rad/s per joint; a
+    joint listed in the block mapping freezes at that time (contact) while its command goes on;
+    after the move has settled for 0.1 s the command returns to the start (retreat) and the
+    blocks are released.
+    """
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / rate
+    q = np.zeros(n)
+    qc = np.zeros(n)
+    rows_q, rows_qd, rows_tau, rows_qc = [], [], [], []
+    t = 0.0
+    ts = []
+
+    def step(target, blocked):
+        nonlocal t, q, qc
+        qc = qc + np.clip(target - qc, -speed * dt, speed * dt)
+        new = q + (qc - q) * (1 - np.exp(-dt / 0.02))
+        new[blocked] = q[blocked]
+        qd_true = (new - q) / dt
+        q = new
+        ts.append(t)
+        t += dt
+        rows_q.append(q.copy())
+        rows_qd.append(qd_true)
+        rows_qc.append(qc.copy())
+
+    for _ in range(round(0.2 * rate)):  # rest at start
+        step(np.zeros(n), np.zeros(n, bool))
+    for target, blocks in moves:
+        target = np.asarray(target, float)
+        start = q.copy()
+        t0 = t
+        blocked = np.zeros(n, bool)
+        settled = 0
+        while settled < round(0.1 * rate):
+            for j, tb in blocks.items():
+                if t - t0 >= tb:
+                    blocked[: j + 1] = True  # joints 0..j stop when link j touches
+            step(target, blocked)
+            if np.all(blocked | (np.abs(rows_qd[-1]) < 1e-3)) and (
+                    np.any(blocked) or np.allclose(q, target, atol=1e-3)):
+                settled += 1
+        while not np.allclose(q, start, atol=1e-3):
+            step(start, np.zeros(n, bool))
+        for _ in range(round(0.1 * rate)):
+            step(start, np.zeros(n, bool))
+    q_true = np.array(rows_q)
+    qd_true = np.array(rows_qd)
+    q_meas = np.round((q_true + rng.normal(0, q_noise, q_true.shape)) / quantum) * quantum
+    if differentiate:
+        qd_meas = np.vstack([np.zeros((1, n)), np.diff(q_meas, axis=0) * rate])
+    else:
+        qd_meas = qd_true + rng.normal(0, qd_noise, qd_true.shape)
+    qc_arr = np.array(rows_qc)
+    tau = K * (qc_arr - q_meas) - D * qd_meas
+    names = tuple(f"j{i}" for i in range(n))
+    return JointLog(names, np.array(ts), q_meas, qd_meas, tau, qc_arr)
+
+
+def test_single_contacts_identify_the_link():
+    moves = [([0.6, 0.5, 0.4], {1: 0.3}),   # link 1 touches; joint 2 goes on to its target
+             ([0.6, 0.5, 0.4], {2: 0.35}),  # tip link
+             ([0.6, 0.5, 0.4], {0: 0.2})]   # link 0
+    log = impedance_log(moves)
+    c = detect_contacts(log)
+    assert isinstance(c, Contacts)
+    assert c.link.tolist() == [1, 2, 0]
+    assert c.q.shape == (3, 3) and c.qd_before.shape == (3, 3)
+    # contact times: within 40 ms after the block instants
+    assert np.all(np.diff(c.t) > 0) and np.all(c.t_end > c.t)
+    # motion just before the stop is positive on the joints that moved
+    assert np.all(c.qd_before[0, :2] > 0.3)
+
+
+def test_reaching_the_target_is_not_a_contact():
+    log = impedance_log([([0.3, 0.2, 0.1], {}), ([0.2, -0.2, 0.3], {})])
+    assert len(detect_contacts(log)) == 0
+
+
+def test_two_stage_contact_gives_two_contacts_inner_then_outer():
+    log = impedance_log([([0.6, 0.5, 0.8], {0: 0.25, 2: 0.6})])
+    c = detect_contacts(log)
+    assert c.link.tolist() == [0, 2]
+    # second contact: joint 0 already at rest → its velocity before is 0; joints 1, 2 moving
+    assert c.qd_before[1, 0] == 0.0
+    assert np.all(c.qd_before[1, 1:] > 0.3)
+    assert c.index[1] > c.index[0]
+
+
+def test_noisy_50hz_log_with_differentiated_velocity():
+    moves = [([0.6, 0.5, 0.4], {1: 0.3}), ([0.6, 0.5, 0.4], {2: 0.4}),
+             ([0.6, 0.5, 0.9], {0: 0.2, 2: 0.7}), ([0.3, 0.2, 0.1], {})]
+    log = impedance_log(moves, rate=50.0, q_noise=3e-4, quantum=2e-4, differentiate=True, seed=3)
+    c = detect_contacts(log)
+    assert c.link.tolist() == [1, 2, 0, 2]
+    # thresholds follow the noise: the 50 Hz differentiated velocity is much noisier
+    quiet = detect_contacts(impedance_log(moves, seed=3))
+    assert np.all(c.velocity_threshold > quiet.velocity_threshold)
+
+
+def test_empty_contacts_are_well_formed():
+    log = impedance_log([([0.3, 0.2, 0.1], {})])
+    c = detect_contacts(log)
+    assert len(c) == 0 and c.q.shape == (0, 3) and c.qd_before.shape == (0, 3)
+    assert c.select(np.zeros(0, bool)).link.shape == (0,)
+
+
+def test_missing_torques_and_nans_are_clear_errors():
+    log = impedance_log([([0.3, 0.2, 0.1], {1: 0.1})])
+    no_tau = JointLog(log.joint_names, log.t, log.q, log.qd)
+    with pytest.raises(InputError, match="no commanded torques"):
+        detect_contacts(no_tau)
+    qd = np.array(log.qd)
+    qd[10, 1] = np.nan
+    bad = JointLog(log.joint_names, log.t, log.q, qd, log.tau_cmd)
+    with pytest.raises(InputError, match="qd contains 1 NaN"):
+        detect_contacts(bad)
+    with pytest.raises(InputError, match="min_stop_samples"):
+        DetectionParams(min_stop_samples=0)
