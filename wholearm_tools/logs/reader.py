@@ -1,0 +1,311 @@
+"""Read MCAP joint logs (ROS 2 or JSON profile) into :class:`JointLog` / :class:`Run`.
+
+Rules (see ``docs/log-format.md``):
+
+* Times are the JointState ``header.stamp`` (the MCAP log time when every stamp is zero, and
+  for ``Float64MultiArray`` commands, which have no header).
+* Messages out of time order are sorted by stamp (stable) with a :class:`LogWarning`; messages
+  repeating an earlier stamp are then dropped (the first one is kept) with a warning, so
+  ``JointLog.t`` is strictly increasing.
+* Joints are matched by name; log joints the robot does not have are ignored with a warning;
+  robot joints missing from the log are an error.
+* Missing or partial velocities are differentiated from positions (central differences on the
+  stamps, ``numpy.gradient``).
+* Commands are held onto the state stamps (zero-order hold: the latest command at or before each
+  state).  Before the first command the torque is 0 and the commanded position is the measured
+  one.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.errors import LogFormatError
+from wholearm_tools.logs.decoders import ArrayColumns, JointStateColumns, ValueList
+from wholearm_tools.logs.records import GroundTruth, JointLog, Run
+from wholearm_tools.logs.scan import LogScan, scan_mcap
+from wholearm_tools.logs.schemas import (
+    COMMAND_TOPIC,
+    DESCRIPTION_TOPIC,
+    FLOAT64_MULTI_ARRAY,
+    GROUND_TRUTH,
+    JOINT_STATE,
+    JOINT_TOPIC,
+    STRING,
+    TRUTH_TOPIC,
+)
+from wholearm_tools.robot.model import RobotModel
+
+log = logging.getLogger(__name__)
+
+
+class LogWarning(UserWarning):
+    """A log was readable but something in it was fixed up (sorted, dropped, truncated)."""
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, LogWarning, stacklevel=3)
+
+
+def joint_state_topics(scan: LogScan) -> list[str]:
+    """Topics of ``scan`` carrying ``sensor_msgs/msg/JointState``."""
+    return [t for t, s in scan.topics.items() if s.schema_name == JOINT_STATE]
+
+
+def _scan(path: Path, joint_topic: str | None, command_topic: str | None) -> LogScan:
+    commands = command_topic or COMMAND_TOPIC
+
+    def wanted(topic: str, schema: str) -> bool:
+        if schema == JOINT_STATE:
+            return joint_topic is None or topic in (joint_topic, commands)
+        if schema == FLOAT64_MULTI_ARRAY:
+            return topic == commands
+        if schema == STRING:
+            return topic == DESCRIPTION_TOPIC
+        return schema == GROUND_TRUTH
+
+    scan = scan_mcap(path, wanted)
+    if scan.truncated:
+        _warn(f"{path}: file is truncated ({scan.truncation}); read the {scan.n_messages} "
+              "messages before the cut")
+    return scan
+
+
+def _select_joint_topic(scan: LogScan, joint_topic: str | None,
+                        command_topic: str | None) -> str:
+    topics = joint_state_topics(scan)
+    if joint_topic is not None:
+        if joint_topic not in scan.decoded or joint_topic not in topics:
+            raise LogFormatError(f"{scan.source}: no JointState topic {joint_topic!r}; "
+                                 f"JointState topics: {topics or 'none'}")
+        return joint_topic
+    if JOINT_TOPIC in topics:
+        return JOINT_TOPIC
+    candidates = [t for t in topics if t != (command_topic or COMMAND_TOPIC)]
+    if not candidates:
+        raise LogFormatError(f"{scan.source}: no JointState topic (expected {JOINT_TOPIC}); "
+                             f"topics: {sorted(scan.topics)}")
+    if len(candidates) > 1:
+        raise LogFormatError(f"{scan.source}: no {JOINT_TOPIC} and several JointState topics "
+                             f"{candidates}; choose one with joint_topic (--joint-topic)")
+    return candidates[0]
+
+
+def _times(stamp_ns: NDArray[np.int64], log_time_ns: NDArray[np.int64], source: str,
+           topic: str) -> NDArray[np.int64]:
+    if stamp_ns.shape[0] > 1 and not np.any(stamp_ns):
+        _warn(f"{source}: topic {topic!r} has zero header stamps; using MCAP log times")
+        return log_time_ns
+    return stamp_ns
+
+
+def _order(times: NDArray[np.int64], source: str, topic: str) -> NDArray[np.intp]:
+    """Indices that sort ``times`` (stable) and drop repeated stamps (first kept)."""
+    order = np.argsort(times, kind="stable")
+    if times.shape[0] > 1 and np.any(np.diff(times) < 0):
+        moved = int(np.count_nonzero(order != np.arange(order.shape[0])))
+        _warn(f"{source}: topic {topic!r}: {moved} messages out of time order; sorted by stamp")
+    sorted_times = times[order]
+    keep = np.ones(order.shape[0], dtype=bool)
+    keep[1:] = np.diff(sorted_times) > 0
+    if not keep.all():
+        _warn(f"{source}: topic {topic!r}: dropped {int((~keep).sum())} messages repeating an "
+              "earlier stamp (kept the first)")
+    return order[keep]
+
+
+def _columns_for(names: tuple[str, ...], available: tuple[str, ...], source: str, topic: str,
+                 warn_extra: bool) -> list[int]:
+    index = {name: i for i, name in enumerate(available)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise LogFormatError(f"{source}: topic {topic!r} lacks joints {missing} "
+                             f"(log joints: {list(available)})")
+    extra = [n for n in available if n not in set(names)]
+    if extra and warn_extra:
+        _warn(f"{source}: topic {topic!r}: ignoring joints not in the robot: {extra}")
+    return [index[n] for n in names]
+
+
+def _hold(t_cmd: NDArray[np.int64], values: NDArray[np.float64], t_state: NDArray[np.int64],
+          before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Zero-order hold of ``values (M, n)`` at ``t_cmd`` onto ``t_state``; ``before (N, n)``
+    where no command was given yet."""
+    idx = np.searchsorted(t_cmd, t_state, side="right") - 1
+    out = np.array(before, dtype=float, copy=True)
+    ok = idx >= 0
+    out[ok] = values[idx[ok]]
+    return out
+
+
+def _commands(scan: LogScan, topic: str, explicit: bool, names: tuple[str, ...],
+              t_state: NDArray[np.int64], q: NDArray[np.float64]
+              ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    decoded = scan.decoded.get(topic)
+    if decoded is None:
+        if explicit:
+            raise LogFormatError(f"{scan.source}: no command topic {topic!r} "
+                                 f"(JointState or Float64MultiArray); topics: "
+                                 f"{sorted(scan.topics)}")
+        return None, None
+    source = scan.source
+    if isinstance(decoded, ArrayColumns):
+        if decoded.n_messages == 0:
+            return None, None
+        if decoded.data.shape[1] != len(names):
+            raise LogFormatError(f"{source}: command topic {topic!r} carries "
+                                 f"{decoded.data.shape[1]} values per message, expected "
+                                 f"{len(names)} (one per joint, in robot joint order)")
+        keep = _order(decoded.log_time_ns, source, topic)
+        tau = _hold(decoded.log_time_ns[keep], decoded.data[keep], t_state,
+                    np.zeros_like(q))
+        return tau, None
+    assert isinstance(decoded, JointStateColumns)
+    if decoded.n_messages == 0:
+        return None, None
+    cols = _columns_for(names, decoded.names, source, topic, warn_extra=True)
+    times = _times(decoded.stamp_ns, decoded.log_time_ns, source, topic)
+    keep = _order(times, source, topic)
+    t_cmd = times[keep]
+    tau = q_cmd = None
+    effort = decoded.effort[keep][:, cols]
+    if np.all(np.isfinite(effort)):
+        tau = _hold(t_cmd, effort, t_state, np.zeros_like(q))
+    elif np.any(np.isfinite(effort)):
+        raise LogFormatError(f"{source}: command topic {topic!r} has efforts in some messages "
+                             "or joints only")
+    position = decoded.position[keep][:, cols]
+    if np.all(np.isfinite(position)):
+        q_cmd = _hold(t_cmd, position, t_state, q)
+    return tau, q_cmd
+
+
+def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
+               command_topic: str | None, require_commands: bool, warn_extra: bool) -> JointLog:
+    source = scan.source
+    cols_data = scan.decoded[topic]
+    assert isinstance(cols_data, JointStateColumns)
+    if cols_data.n_messages == 0:
+        raise LogFormatError(f"{source}: topic {topic!r} has no messages")
+    names = cols_data.names if names is None else tuple(names)
+    cols = _columns_for(names, cols_data.names, source, topic, warn_extra)
+    times = _times(cols_data.stamp_ns, cols_data.log_time_ns, source, topic)
+    keep = _order(times, source, topic)
+    stamps = times[keep]
+    q = cols_data.position[keep][:, cols]
+    bad = ~np.isfinite(q)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise LogFormatError(
+            f"{source}: topic {topic!r}: {int(bad.sum())} NaN or missing positions (first: "
+            f"joint {names[col]!r} at t = {(stamps[row] - stamps[0]) * 1e-9:.6f} s)")
+    t = (stamps - stamps[0]).astype(np.float64) * 1e-9
+    qd = cols_data.velocity[keep][:, cols]
+    if not np.all(np.isfinite(qd)):
+        log.info("%s: topic %r has no complete velocities; differentiating positions",
+                 source, topic)
+        qd = np.gradient(q, t, axis=0) if t.shape[0] > 1 else np.zeros_like(q)
+    cmd_topic = command_topic or COMMAND_TOPIC
+    tau_cmd, q_cmd = (None, None) if cmd_topic == topic else _commands(
+        scan, cmd_topic, command_topic is not None, names, stamps, q)
+    if require_commands and tau_cmd is None:
+        raise LogFormatError(f"{source}: no commanded torques (expected effort[] on "
+                             f"{cmd_topic!r} as JointState or Float64MultiArray)")
+    return JointLog(joint_names=names, t=t, q=q, qd=qd, tau_cmd=tau_cmd, q_cmd=q_cmd,
+                    t0_ns=int(stamps[0]))
+
+
+def read_joint_log(
+    path: str | os.PathLike[str],
+    *,
+    joint_topic: str | None = None,
+    command_topic: str | None = None,
+    joint_names: tuple[str, ...] | None = None,
+    require_commands: bool = False,
+) -> JointLog:
+    """Read one arm's joint states (and commands if present) without a robot model.
+
+    Parameters
+    ----------
+    path : MCAP file
+    joint_topic : JointState topic; default ``/joint_states``, or the only JointState topic
+    command_topic : command topic (JointState effort[] or Float64MultiArray); default
+        ``/joint_commands`` when present
+    joint_names : joints to read, in this order (default: every joint of the topic)
+    require_commands : raise LogFormatError when there are no commanded torques
+    """
+    path = Path(path)
+    scan = _scan(path, joint_topic, command_topic)
+    topic = _select_joint_topic(scan, joint_topic, command_topic)
+    return _joint_log(scan, topic, joint_names, command_topic, require_commands,
+                      warn_extra=joint_names is not None)
+
+
+def ground_truth_from_json(body: Any, source: str = "ground truth") -> GroundTruth:
+    """Inverse of :func:`wholearm_tools.logs.writer.ground_truth_to_json`."""
+    try:
+        contacts = body["contacts"]
+        m = len(contacts["t"])
+        return GroundTruth(
+            surfaces=tuple(body["surfaces"]),
+            contact_t=np.asarray(contacts["t"], dtype=float).reshape(m),
+            contact_link=np.asarray(contacts["link"], dtype=np.int64).reshape(-1),
+            contact_kind=np.asarray(contacts["kind"], dtype=np.str_).reshape(-1),
+            contact_point=np.asarray(contacts["point"], dtype=float).reshape(m, 3),
+            contact_surface=np.asarray(contacts["surface"], dtype=np.int64).reshape(-1),
+            contact_s=np.asarray(contacts["s"], dtype=float).reshape(-1),
+            meta=dict(body.get("meta") or {}),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LogFormatError(f"{source}: malformed ground truth ({exc!r})") from None
+
+
+def _robot(scan: LogScan, robot: RobotModel | str | os.PathLike[str] | None) -> RobotModel:
+    from wholearm_tools.robot import load_urdf, robot_from_urdf
+
+    if isinstance(robot, RobotModel):
+        return robot
+    if robot is not None:
+        return load_urdf(robot)
+    description = scan.decoded.get(DESCRIPTION_TOPIC)
+    if not isinstance(description, ValueList) or not description.values:
+        raise LogFormatError(f"{scan.source}: no URDF on {DESCRIPTION_TOPIC} and no robot "
+                             "given (pass robot=RobotModel or a URDF path, or --robot)")
+    return robot_from_urdf(description.values[0], source=f"{scan.source} {DESCRIPTION_TOPIC}")
+
+
+def read_run(
+    path: str | os.PathLike[str],
+    *,
+    joint_topic: str | None = None,
+    command_topic: str | None = None,
+    robot: RobotModel | str | os.PathLike[str] | None = None,
+    require_commands: bool = False,
+) -> Run:
+    """Read a run: robot (``robot`` argument or the log's URDF), joint log, ground truth.
+
+    Parameters
+    ----------
+    path : MCAP file (ROS 2 or JSON profile, detected from the channels)
+    joint_topic, command_topic : see :func:`read_joint_log`
+    robot : RobotModel or URDF file; default: the URDF on ``/robot_description``
+    require_commands : raise LogFormatError when there are no commanded torques
+    """
+    path = Path(path)
+    scan = _scan(path, joint_topic, command_topic)
+    topic = _select_joint_topic(scan, joint_topic, command_topic)
+    model = _robot(scan, robot)
+    joint_log = _joint_log(scan, topic, model.joint_names, command_topic, require_commands,
+                           warn_extra=True)
+    truth = None
+    values = scan.decoded.get(TRUTH_TOPIC)
+    if isinstance(values, ValueList) and values.values:
+        truth = ground_truth_from_json(values.values[0], f"{path} {TRUTH_TOPIC}")
+    return Run(robot=model, log=joint_log, truth=truth, source=str(path))
