@@ -14,6 +14,18 @@ from wholearm_tools.geometry.base import (
     primitive_type,
     register,
 )
+from wholearm_tools.geometry.bounded import (
+    OBSTACLE_TYPES,
+    Arc2D,
+    CylinderJunction,
+    CylinderSection,
+    Obstacle,
+    PlanePatch,
+    Segment2D,
+    Surface,
+    obstacle_from_dict,
+    register_obstacle,
+)
 from wholearm_tools.geometry.primitives import (
     Circle2D,
     Cone,
@@ -26,7 +38,17 @@ from wholearm_tools.geometry.primitives import (
 )
 
 __all__ = [
+    "OBSTACLE_TYPES",
     "PRIMITIVE_TYPES",
+    "Arc2D",
+    "CylinderJunction",
+    "CylinderSection",
+    "Obstacle",
+    "PlanePatch",
+    "Segment2D",
+    "Surface",
+    "obstacle_from_dict",
+    "register_obstacle",
     "Circle2D",
     "Cone",
     "Cylinder",
