@@ -1,0 +1,144 @@
+"""Tip probability on hand-built planar motions with known answers; swept map; bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wholearm_tools.classify import (
+    NEVER,
+    ClassifyParams,
+    swept_map,
+    tip_probability,
+    tip_probability_history,
+)
+from wholearm_tools.contacts import Contacts
+from wholearm_tools.errors import InputError
+from wholearm_tools.logs.records import JointLog, Run
+from wholearm_tools.robot import RobotModel
+
+
+def two_link(l1=0.6, l2=0.15, r=0.015):
+    return RobotModel.from_spec({
+        "joints": [{"origin": [0, 0, 0], "radius": r}, {"origin": [l1, 0, 0], "radius": r}],
+        "tip": {"offset": [l2, 0, 0], "radius": r}}, name="two_link")
+
+
+def log_from(robot, qs, rate=500.0):
+    qs = np.asarray(qs, float)
+    t = np.arange(qs.shape[0]) / rate
+    qd = np.gradient(qs, t, axis=0)
+    return JointLog(robot.joint_names, t, qs, qd, np.zeros_like(qs))
+
+
+def contact_at(log, idx, link):
+    n = log.q.shape[1]
+    return Contacts([log.t[idx]], [link], [idx], [log.q[idx]], [log.qd[idx - 3]], [log.t[-1]],
+                    np.ones(n), np.ones(n))
+
+
+def ramp(a, b, k=200):
+    return np.linspace(a, b, k)
+
+
+def tip_push_run(explore_after: bool):
+    """Link 2 perpendicular to link 1; joint 0 turns so the tip moves along link 2's axis."""
+    robot = two_link()
+    approach = np.stack([ramp(-0.3, 0.0), np.full(200, np.pi / 2)], 1)
+    dwell = np.repeat(approach[-1:], 30, 0)
+    parts = [approach, dwell, approach[::-1]]
+    if explore_after:
+        # retreat further, then swing link 2 through the space beside its contact pose
+        q = approach[0]
+        parts.append(np.stack([np.full(200, q[0]), ramp(np.pi / 2, np.pi / 2 + 0.9)], 1))
+        parts.append(np.stack([ramp(q[0], 0.1), np.full(200, np.pi / 2 + 0.9)], 1))
+    return robot, log_from(robot, np.vstack(parts)), 199
+
+
+def side_swipe_run(explore_after: bool):
+    """Straight arm turning about joint 0: link 1's side leads, into a post at mid-link."""
+    robot = two_link(0.5, 0.3)
+    approach = np.stack([ramp(0.0, 0.5), np.zeros(200)], 1)
+    parts = [approach, np.repeat(approach[-1:], 30, 0), approach[::-1]]
+    if explore_after:
+        # back off a little, then bend the forearm forward: the tip passes just ahead of its
+        # contact position while the middle of the link stays clear of the post
+        parts = [approach, np.repeat(approach[-1:], 30, 0),
+                 np.stack([ramp(0.5, 0.4, 50), np.zeros(50)], 1),
+                 np.stack([np.full(100, 0.4), ramp(0.0, 0.35, 100)], 1),
+                 np.stack([np.full(100, 0.4), ramp(0.35, 0.0, 100)], 1),
+                 np.stack([ramp(0.4, 0.0, 100), np.zeros(100)], 1)]
+    return robot, log_from(robot, np.vstack(parts)), 199
+
+
+def test_tip_pushed_into_a_wall_is_a_tip_contact():
+    robot, log, idx = tip_push_run(False)
+    cl = tip_probability(Run(robot, log), contact_at(log, idx, 1), 0.02)
+    assert cl.p_tip[0] > 0.5
+    assert 0.0 <= cl.p_tip_swept[0] <= 1.0 and cl.p_tip_swept[0] > 0.5
+
+
+def test_link_swept_sideways_into_a_post_is_a_link_contact():
+    robot, log, idx = side_swipe_run(False)
+    cl = tip_probability(Run(robot, log), contact_at(log, idx, 1), 0.02)
+    assert cl.p_tip[0] < 0.5
+    assert cl.label[0] == "link"
+    assert cl.p_tip_swept[0] < 0.5
+
+
+@pytest.mark.parametrize("make", [tip_push_run, side_swipe_run])
+def test_offline_map_moves_p_tip_toward_the_truth(make):
+    robot, log, idx = make(True)
+    c = contact_at(log, idx, 1)
+    causal = tip_probability(Run(robot, log), c, 0.02, causal=True)
+    offline = tip_probability(Run(robot, log), c, 0.02)
+    assert np.all((offline.p_tip >= 0) & (offline.p_tip <= 1))
+    truth = 1.0 if make is tip_push_run else 0.0
+    assert abs(offline.p_tip[0] - truth) < abs(causal.p_tip[0] - truth) - 0.02
+    # causal = the map-free answer here: nothing was explored before the first contact
+    assert causal.p_tip[0] == pytest.approx(causal.p_tip_nomap[0])
+    # weights: the surer contact gets the smaller variance
+    assert offline.variance[0] < causal.variance[0]
+    # replay: P_T is the causal value at the contact and the offline value at the end
+    hist = tip_probability_history(Run(robot, log), c, 0.02, [0.0, log.t[idx], log.t[-1]])
+    assert np.isnan(hist[0, 0])
+    assert hist[0, 1] == pytest.approx(causal.p_tip[0])
+    assert hist[0, 2] == pytest.approx(offline.p_tip[0])
+
+
+def test_swept_map_marks_the_capsules_and_first_times():
+    robot = two_link(0.5, 0.3, r=0.02)
+    qs = np.stack([ramp(0.0, np.pi / 2), np.zeros(200)], 1)
+    smap = swept_map(robot, qs, resolution=0.01)
+    # the quarter annulus swept by the arm is free, the opposite quadrant is not
+    assert smap.first_at([[0.4, 0.4]])[0] != NEVER
+    assert smap.first_at([[-0.4, -0.4]])[0] == NEVER
+    # first time grows with the angle of the swept point
+    f = smap.first_at([[0.6, 0.05], [0.05, 0.6]])
+    assert f[0] < f[1]
+    # a point 3 cm outside the arm's reach is not swept, but is within 4 cm of swept cells
+    far = [[0.0, 0.83]]
+    assert smap.first_at(far)[0] == NEVER and smap.first_within(far, 0.04)[0] != NEVER
+
+
+def test_bad_inputs_raise():
+    robot, log, idx = side_swipe_run(False)
+    c = contact_at(log, idx, 1)
+    with pytest.raises(InputError, match="B must be a positive"):
+        tip_probability(Run(robot, log), c, 0.0)
+    with pytest.raises(InputError, match="needs robot"):
+        tip_probability(log, c, 0.02)
+    q = np.array(log.q)
+    q[5, 0] = np.nan
+    bad = JointLog(log.joint_names, log.t, q, log.qd, log.tau_cmd)
+    with pytest.raises(InputError, match="NaN"):
+        tip_probability(bad, c, 0.02, robot=robot)
+    with pytest.raises(InputError, match="link_threshold"):
+        ClassifyParams(tip_threshold=0.2, link_threshold=0.6)
+
+
+def test_no_contacts_classify_to_empty_records():
+    robot, log, _ = side_swipe_run(False)
+    empty = Contacts([], [], [], np.zeros((0, 2)), np.zeros((0, 2)), [], np.ones(2), np.ones(2))
+    cl = tip_probability(Run(robot, log), empty, 0.02)
+    assert len(cl) == 0 and cl.label.shape == (0,)

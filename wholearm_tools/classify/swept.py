@@ -1,0 +1,249 @@
+"""The swept occupancy map: where the robot's capsules have been, and since when.
+
+One raster pass over the run stores, for every cell of a regular grid (2-D xy grid for planar
+robots, 3-D voxels otherwise), the index of the first log sample at which the cell centre was
+inside the robot.  That single ``first`` field answers every question the classifier asks:
+
+* offline map (the whole run): cell swept ⇔ ``first < N``;
+* causal map as the robot saw it at sample ``i``: cell swept ⇔ ``first <= i``;
+* the replay of the paper's Figure 4: the same test for a growing ``i``.
+
+A cell counts as swept only when its centre lies inside a capsule (never when it merely
+overlaps one), so the free space is under-estimated rather than over-estimated: a cell holding
+a surface is never called free because the robot touched it.
+
+Poses are subsampled so that no point of the robot moves by more than ``step`` between two
+rasterised poses (``step`` = half the smallest link radius, at least half a cell): consecutive
+capsules overlap and the union covers the swept volume.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.robot.model import RobotModel
+
+FloatArray = NDArray[np.float64]
+NEVER = np.iinfo(np.int32).max
+"""``first`` value of a cell the robot never swept."""
+
+#: default cell budgets (dense int32 grids: 4 bytes per cell)
+MAX_CELLS_2D = 4_000_000
+MAX_CELLS_3D = 8_000_000
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SweptMap:
+    """First-sweep sample index on a regular grid.
+
+    Parameters
+    ----------
+    origin : (d,) float, centre of cell ``(0, ..., 0)`` [m]
+    resolution : float, cell edge [m]
+    first : (nx, ny[, nz]) int32, first log sample at which the cell was inside the robot
+        (:data:`NEVER` if never)
+    n_samples : int, number of log samples the map was built from
+    """
+
+    origin: FloatArray
+    resolution: float
+    first: NDArray[np.int32]
+    n_samples: int
+
+    def __post_init__(self) -> None:
+        origin = np.array(self.origin, dtype=float)
+        if origin.shape != (self.first.ndim,):
+            raise InputError(f"expected origin of shape ({self.first.ndim},), got {origin.shape}")
+        if not self.resolution > 0:
+            raise InputError(f"resolution must be > 0, got {self.resolution}")
+        origin.setflags(write=False)
+        object.__setattr__(self, "origin", origin)
+        self.first.setflags(write=False)
+
+    @property
+    def dim(self) -> int:
+        return int(self.first.ndim)
+
+    def swept(self, until: int | None = None) -> NDArray[np.bool_]:
+        """Boolean grid of cells swept at or before sample ``until`` (all samples if None)."""
+        if until is None:
+            return self.first != NEVER
+        return self.first <= until
+
+    def cells(self, points: ArrayLike) -> NDArray[np.int64]:
+        """Integer cell coordinates of ``points (..., d)`` (may be out of the grid)."""
+        p = np.asarray(points, dtype=float)
+        return np.floor((p - self.origin) / self.resolution + 0.5).astype(np.int64)
+
+    def first_at(self, points: ArrayLike) -> NDArray[np.int64]:
+        """``first`` of the cell holding each point, :data:`NEVER` outside the grid."""
+        c = self.cells(points)
+        return self._lookup(c)
+
+    def _lookup(self, c: NDArray[np.int64]) -> NDArray[np.int64]:
+        shape = np.array(self.first.shape)
+        inside = np.all((c >= 0) & (c < shape), axis=-1)
+        out = np.full(c.shape[:-1], NEVER, dtype=np.int64)
+        cc = c[inside]
+        out[inside] = self.first[tuple(cc.T)]
+        return out
+
+    def first_within(self, points: ArrayLike, radius: float) -> NDArray[np.int64]:
+        """Earliest ``first`` over the cells whose centre lies within ``radius`` of each point.
+
+        ``points (..., d)`` → ``(...)`` int; :data:`NEVER` where no such cell was swept (or
+        ``radius <= 0``).  This is the swept map dilated by ``radius``, evaluated exactly at the
+        query points without dilating the whole grid.
+        """
+        p = np.asarray(points, dtype=float)
+        batch = p.shape[:-1]
+        p = p.reshape(-1, self.dim)
+        out = np.full(p.shape[0], NEVER, dtype=np.int64)
+        if radius <= 0 or p.shape[0] == 0:
+            return out.reshape(batch)
+        reach = int(np.ceil(radius / self.resolution + 0.5 * np.sqrt(self.dim)))
+        axes = [np.arange(-reach, reach + 1)] * self.dim
+        offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, self.dim)
+        lim = radius / self.resolution + 0.5 * np.sqrt(self.dim)
+        offs = offs[np.sum(offs**2, axis=1) <= lim**2]
+        base = self.cells(p)
+        chunk = max(1, 2_000_000 // offs.shape[0])
+        for s in range(0, p.shape[0], chunk):
+            c = base[s:s + chunk, None, :] + offs[None]
+            centre = self.origin + c * self.resolution
+            near = np.sum((centre - p[s:s + chunk, None, :]) ** 2, axis=-1) <= radius**2
+            f = self._lookup(c)
+            f[~near] = NEVER
+            out[s:s + chunk] = f.min(axis=1)
+        return out.reshape(batch)
+
+
+def default_resolution(robot: RobotModel, B: float | None = None,
+                       extent: ArrayLike | None = None) -> float:
+    """Cell size: ``min(B / 2, smallest robot radius)``, enlarged to fit the cell budget.
+
+    ``extent (d,)`` is the size of the box to cover (default: ``2 * reach`` per axis).
+    """
+    radii = [float(r) for r in robot.link_radii if r > 0]
+    res = min(radii) if radii else robot.reach / 100
+    if B is not None and B > 0:
+        res = min(res, B / 2)
+    dim = robot.dim
+    ext = np.full(dim, 2 * robot.reach) if extent is None else np.asarray(extent, float)
+    budget = MAX_CELLS_2D if dim == 2 else MAX_CELLS_3D
+    cells = float(np.prod(ext / res + 1))
+    if cells > budget:
+        res *= (cells / budget) ** (1 / dim) * 1.01
+    return float(res)
+
+
+def _robot_parts(robot: RobotModel) -> tuple[FloatArray, list[tuple[int, int, float]]]:
+    """Capsules to rasterise as (start point row, end point row, radius) on joint_positions."""
+    n = robot.dof
+    parts = [(i, i + 1, float(robot.link_radii[i])) for i in range(n) if robot.link_radii[i] > 0]
+    if robot.tip_radius > robot.link_radii[-1]:
+        parts.append((n, n, robot.tip_radius))
+    return np.array([p[2] for p in parts]), parts
+
+
+def pose_subsample(points: FloatArray, step: float) -> NDArray[np.int64]:
+    """Sample indices such that no robot point moves more than ``step`` between kept ones.
+
+    ``points (N, K, d)`` are the joint and tip positions (the displacement of a rigid segment is
+    largest at an end).  The first and last samples are always kept.
+    """
+    N = points.shape[0]
+    if N <= 2:
+        return np.arange(N)
+    disp = np.max(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(disp)])
+    bucket = np.floor(cum / step).astype(np.int64)
+    keep = np.flatnonzero(np.diff(bucket)) + 1
+    # a jump larger than one step needs its predecessor too so the gap is bridged
+    keep = np.union1d(keep, np.maximum(keep - 1, 0))
+    return np.union1d([0, N - 1], keep).astype(np.int64)
+
+
+def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
+              resolution: float | None = None, margin: float | None = None) -> SweptMap:
+    """Rasterise the robot's capsules over a joint trajectory into a :class:`SweptMap`.
+
+    Parameters
+    ----------
+    robot : RobotModel
+    q : (N, n) float, joint positions of every log sample (the map's sample clock)
+    B : float, optional; sets the default resolution (``B / 2``) and the margin
+    resolution : float, optional cell edge [m]
+    margin : float, optional padding of the bounding box beyond the swept robot [m]
+    """
+    q = robot.check_q(q)
+    if q.ndim != 2:
+        raise InputError(f"expected q of shape (N, {robot.dof}), got {q.shape}")
+    dim = robot.dim
+    pts = robot.joint_positions(q)[..., :dim]
+    radii, parts = _robot_parts(robot)
+    rmax = float(radii.max()) if radii.size else 0.0
+    pad = (margin if margin is not None else (B or 0.0) + rmax) + 1e-9
+    lo = pts.reshape(-1, dim).min(axis=0) - rmax - pad
+    hi = pts.reshape(-1, dim).max(axis=0) + rmax + pad
+    res = float(resolution) if resolution is not None else default_resolution(robot, B, hi - lo)
+    if not res > 0:
+        raise InputError(f"resolution must be > 0, got {resolution}")
+    shape = tuple(int(s) for s in np.ceil((hi - lo) / res).astype(int) + 1)
+    first = np.full(shape, NEVER, dtype=np.int32)
+    smap = SweptMap(lo, res, first, int(q.shape[0]))
+    if not parts:
+        return smap
+    step = max(0.5 * float(radii.min()), 0.5 * res)
+    keep = pose_subsample(pts, step)
+    kp = pts[keep]
+    first.setflags(write=True)
+    for a_row, b_row, r in parts:
+        a = kp[:, a_row]
+        b = kp[:, b_row]
+        _raster_capsules(first, lo, res, a, b, r, keep)
+    first.setflags(write=False)
+    return smap
+
+
+def _raster_capsules(first: NDArray[np.int32], origin: FloatArray, res: float, a: FloatArray,
+                     b: FloatArray, r: float, sample: NDArray[np.int64]) -> None:
+    """Mark cells whose centre is within ``r`` of segment ``a[k]-b[k]`` with ``sample[k]``.
+
+    Poses are processed in time order and a cell keeps its first (smallest) sample.
+    """
+    dim = first.ndim
+    length = float(np.max(np.linalg.norm(b - a, axis=1))) if a.shape[0] else 0.0
+    h = max(res, 0.5 * r)  # spacing of the axis points that seed the candidate cells
+    n_ax = max(1, int(np.ceil(length / h)) + 1)
+    s = np.linspace(0.0, 1.0, n_ax)
+    reach = int(np.ceil((r + 0.5 * h) / res + 0.5 * np.sqrt(dim)))
+    axes = [np.arange(-reach, reach + 1)] * dim
+    offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, dim)
+    lim = (r + 0.5 * h) / res + 0.5 * np.sqrt(dim)
+    offs = offs[np.sum(offs**2, axis=1) <= lim**2]
+    shape = np.array(first.shape)
+    strides = np.array([int(np.prod(shape[k + 1:])) for k in range(dim)], dtype=np.int64)
+    flat = first.reshape(-1)
+    per_pose = n_ax * offs.shape[0]
+    chunk = max(1, 3_000_000 // per_pose)
+    for c0 in range(0, a.shape[0], chunk):
+        aa, bb = a[c0:c0 + chunk], b[c0:c0 + chunk]
+        seeds = aa[:, None, :] + s[None, :, None] * (bb - aa)[:, None, :]  # (P, A, d)
+        base = np.floor((seeds - origin) / res + 0.5).astype(np.int64)
+        cand = (base[:, :, None, :] + offs[None, None]).reshape(aa.shape[0], -1, dim)
+        centre = origin + cand * res
+        ab = (bb - aa)[:, None, :]
+        denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
+        u = np.clip(np.sum((centre - aa[:, None, :]) * ab, axis=-1) / denom, 0.0, 1.0)
+        d2 = np.sum((centre - aa[:, None, :] - u[..., None] * ab) ** 2, axis=-1)
+        ok = (d2 <= r * r) & np.all((cand >= 0) & (cand < shape), axis=-1)
+        idx = (cand @ strides)[ok]
+        t = np.broadcast_to(sample[c0:c0 + chunk, None], ok.shape)[ok]
+        idx, first_pos = np.unique(idx, return_index=True)  # candidates are in time order
+        t = t[first_pos].astype(np.int32)
+        flat[idx] = np.minimum(flat[idx], t)
