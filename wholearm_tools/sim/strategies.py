@@ -1,0 +1,187 @@
+"""Exploration strategies: which guarded move to make next.
+
+Each strategy is registered by name in :data:`STRATEGIES` and built with
+``make_strategy(name, robot, rng=..., **params)``.  Common parameters:
+
+``lower``, ``upper`` : (n,) target box in joint space (default: the joint limits);
+``margin`` : float, targets whose clearance is below it are rejected (default 5 mm);
+``min_step`` : float, smallest joint-space distance [rad] from the current configuration.
+
+A strategy only proposes *targets*; guarded moves stop at the first contact, so a target behind a
+wall is a perfectly good way to find the wall.  Targets that start in collision are rejected.
+"""
+
+from __future__ import annotations
+
+import itertools
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.robot.model import RobotModel
+from wholearm_tools.sim.collision import Collider
+from wholearm_tools.sim.occupancy import SweptGrid
+
+FloatArray = NDArray[np.float64]
+
+STRATEGIES: dict[str, type[Strategy]] = {}
+
+
+def register(cls: type[Strategy]) -> type[Strategy]:
+    STRATEGIES[cls.name] = cls
+    return cls
+
+
+def make_strategy(name: str, robot: RobotModel, collider: Collider, grid: SweptGrid,
+                  rng: np.random.Generator | int | None = None, **params: Any) -> Strategy:
+    """Build the strategy registered under ``name``."""
+    try:
+        cls = STRATEGIES[name]
+    except KeyError:
+        raise InputError(f"unknown strategy {name!r} (known: {', '.join(sorted(STRATEGIES))})"
+                         ) from None
+    try:
+        return cls(robot, collider, grid, rng=rng, **params)
+    except TypeError as exc:
+        raise InputError(f"strategy {name!r}: {exc}") from None
+
+
+class Strategy(ABC):
+    """Base class: target box, collision rejection, explicit random generator."""
+
+    name: ClassVar[str]
+
+    def __init__(self, robot: RobotModel, collider: Collider, grid: SweptGrid, *,
+                 rng: np.random.Generator | int | None = None,
+                 lower: Sequence[float] | None = None, upper: Sequence[float] | None = None,
+                 margin: float = 0.005, min_step: float = 0.15) -> None:
+        self.robot = robot
+        self.collider = collider
+        self.grid = grid
+        self.rng = np.random.default_rng(rng)
+        lo = np.array(robot.lower if lower is None else lower, dtype=float)
+        hi = np.array(robot.upper if upper is None else upper, dtype=float)
+        if lo.shape != (robot.dof,) or hi.shape != (robot.dof,):
+            raise InputError(f"strategy box must have {robot.dof} values per bound, got "
+                             f"{lo.shape} and {hi.shape}")
+        self.lower = np.maximum(lo, robot.lower)
+        self.upper = np.minimum(hi, robot.upper)
+        if np.any(self.lower > self.upper):
+            raise InputError(f"strategy box {lo.tolist()}..{hi.tolist()} is outside the joint "
+                             "limits")
+        self.margin = float(margin)
+        self.min_step = float(min_step)
+
+    def acceptable(self, q: FloatArray, candidates: FloatArray) -> NDArray[np.bool_]:
+        """Candidates far enough from ``q`` whose configuration is free (with margin)."""
+        far = np.linalg.norm(candidates - q, axis=1) >= self.min_step
+        ok = np.zeros(len(candidates), dtype=bool)
+        if np.any(far):
+            ok[far] = self.collider.is_free(candidates[far], self.margin)
+        return ok
+
+    def uniform(self, count: int) -> FloatArray:
+        return self.rng.uniform(self.lower, self.upper, size=(count, self.robot.dof))
+
+    @abstractmethod
+    def next_target(self, q: FloatArray) -> FloatArray | None:
+        """Next joint target from configuration ``q (n,)``, or None when nothing is reachable."""
+
+    def observe(self, path: FloatArray) -> None:  # noqa: B027 - optional hook
+        """Called with the configurations the robot actually swept (``(K, n)``)."""
+
+
+@register
+class RandomStrategy(Strategy):
+    """Seeded random guarded moves: uniform targets in the box, colliding ones rejected."""
+
+    name = "random"
+
+    def __init__(self, *args: Any, batch: int = 32, tries: int = 20, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.batch = int(batch)
+        self.tries = int(tries)
+
+    def next_target(self, q: FloatArray) -> FloatArray | None:
+        for _ in range(self.tries):
+            cand = self.uniform(self.batch)
+            ok = np.flatnonzero(self.acceptable(q, cand))
+            if ok.size:
+                return cand[ok[0]]
+        return None
+
+
+@register
+class SweepStrategy(Strategy):
+    """Systematic sweep: a grid over the joint box visited in serpentine order.
+
+    ``counts`` gives the number of grid values per joint (default 5); the last joint varies
+    fastest, so consecutive targets differ mostly in one joint.  The sweep wraps around.
+    """
+
+    name = "sweep"
+
+    def __init__(self, *args: Any, counts: int | Sequence[int] = 5, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        n = self.robot.dof
+        counts_arr = np.broadcast_to(np.asarray(counts, dtype=int), (n,))
+        if np.any(counts_arr < 1):
+            raise InputError(f"sweep counts must be >= 1, got {counts_arr.tolist()}")
+        axes = [np.linspace(lo, hi, c) if c > 1 else np.array([0.5 * (lo + hi)])
+                for lo, hi, c in zip(self.lower, self.upper, counts_arr, strict=True)]
+        self.points = self._serpentine(axes)
+        self.index = 0
+
+    @staticmethod
+    def _serpentine(axes: list[FloatArray]) -> FloatArray:
+        """All grid points, ordered so that consecutive points are grid neighbours."""
+        idx = np.array(list(itertools.product(*[range(len(a)) for a in axes])), dtype=int)
+        # boustrophedon: reverse a digit whenever the sum of the slower digits is odd
+        snake = idx.copy()
+        for d in range(1, idx.shape[1]):
+            flip = idx[:, :d].sum(axis=1) % 2 == 1
+            snake[flip, d] = len(axes[d]) - 1 - idx[flip, d]
+        return np.stack([axes[d][snake[:, d]] for d in range(len(axes))], axis=1)
+
+    def next_target(self, q: FloatArray) -> FloatArray | None:
+        total = len(self.points)
+        chunk = min(total, 64)
+        for _ in range(int(np.ceil(total / chunk))):
+            order = (self.index + np.arange(chunk)) % total
+            ok = np.flatnonzero(self.acceptable(q, self.points[order]))
+            if ok.size:
+                self.index = int((order[ok[0]] + 1) % total)
+                return self.points[order[ok[0]]]
+            self.index = int((order[-1] + 1) % total)
+        return None
+
+
+@register
+class NoveltyStrategy(Strategy):
+    """Prefer unexplored space: among random free candidates, pick the one whose straight
+    joint-space path sweeps the most cells of the swept-occupancy grid not yet visited."""
+
+    name = "novelty"
+
+    def __init__(self, *args: Any, candidates: int = 24, path_samples: int = 6,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.candidates = int(candidates)
+        self.path_samples = int(path_samples)
+
+    def next_target(self, q: FloatArray) -> FloatArray | None:
+        cand = self.uniform(self.candidates * 2)
+        ok = np.flatnonzero(self.acceptable(q, cand))[: self.candidates]
+        if ok.size == 0:
+            return None
+        fr = np.linspace(0.0, 1.0, self.path_samples)[1:, None]
+        scores = np.array([self.grid.novelty(q + fr * (c - q)) for c in cand[ok]], dtype=float)
+        scores += self.rng.uniform(0.0, 0.5, size=scores.shape)  # seeded tie break
+        return cand[ok[int(np.argmax(scores))]]
+
+
+StrategyFactory = Callable[..., Strategy]
