@@ -124,50 +124,54 @@ class TopicDecoder:
 
 # ---------------------------------------------------------------------------- JointState
 class _JointStateAccumulator(TopicDecoder):
-    """Collects blocks ``(names, stamp, log_time, position, velocity, effort)``."""
+    """Collects blocks ``(names, message indices, stamp, log_time, [position, velocity,
+    effort])``; ``result`` scatters them back into file order."""
 
     def __init__(self, channel: ChannelInfo, source: str) -> None:
         super().__init__(channel, source)
-        self.blocks: list[tuple[tuple[str, ...], NDArray, NDArray, list[NDArray]]] = []
+        self.blocks: list[tuple[tuple[str, ...], NDArray, NDArray, NDArray, list[NDArray]]] = []
         self.fast = 0
+        self.count = 0
 
-    def add_block(self, names: tuple[str, ...], stamp: NDArray, log_time: NDArray,
-                  fields: list[NDArray], index: int) -> None:
+    def add_block(self, names: tuple[str, ...], index: NDArray[np.int64], stamp: NDArray,
+                  log_time: NDArray, fields: list[NDArray]) -> None:
         n = len(names)
         for label, arr in zip(("position", "velocity", "effort"), fields, strict=True):
             if arr.shape[1] not in (0, n):
-                raise self.error(f"message {index} has {n} names but {arr.shape[1]} {label} "
-                                 "values")
-        self.blocks.append((names, stamp, log_time, fields))
+                raise self.error(f"message {int(index[0])} has {n} names but {arr.shape[1]} "
+                                 f"{label} values")
+        self.blocks.append((names, index, stamp, log_time, fields))
 
     def result(self) -> JointStateColumns:
-        if not self.blocks:
-            empty = np.zeros((0, 0))
-            return JointStateColumns((), np.zeros(0, np.int64), np.zeros(0, np.int64), empty,
-                                     empty, empty)
         names: list[str] = []
         for block_names, *_ in self.blocks:
             names.extend(x for x in block_names if x not in names)
-        index = {name: i for i, name in enumerate(names)}
-        total = sum(b[1].shape[0] for b in self.blocks)
+        lookup = {name: i for i, name in enumerate(names)}
+        total = self.count
         out = [np.full((total, len(names)), np.nan) for _ in range(3)]
-        stamps = np.empty(total, np.int64)
-        log_times = np.empty(total, np.int64)
-        row = 0
-        for block_names, stamp, log_time, fields in self.blocks:
-            k = stamp.shape[0]
-            cols = [index[x] for x in block_names]
-            identity = cols == list(range(len(names)))
-            stamps[row:row + k] = stamp
-            log_times[row:row + k] = log_time
+        stamps = np.zeros(total, np.int64)
+        log_times = np.zeros(total, np.int64)
+        filled = np.zeros(total, dtype=bool)
+        for block_names, index, stamp, log_time, fields in self.blocks:
+            cols = [lookup[x] for x in block_names]
+            k = index.shape[0]
+            rows: slice | NDArray = index
+            if k and int(index[-1]) - int(index[0]) == k - 1 and np.all(np.diff(index) == 1):
+                rows = slice(int(index[0]), int(index[0]) + k)
+            stamps[rows] = stamp
+            log_times[rows] = log_time
+            filled[rows] = True
             for target, arr in zip(out, fields, strict=True):
                 if arr.shape[1] == 0:
                     continue
-                if identity:
-                    target[row:row + k] = arr
+                if cols == list(range(len(names))):
+                    target[rows] = arr
+                elif isinstance(rows, slice):
+                    target[rows, np.asarray(cols)] = arr
                 else:
-                    target[row:row + k, cols] = arr
-            row += k
+                    target[np.ix_(rows, np.asarray(cols))] = arr
+        if not filled.all():  # pragma: no cover - every message lands in exactly one block
+            raise self.error("internal error: messages lost while decoding")
         self.blocks.clear()
         return JointStateColumns(tuple(names), stamps, log_times, *out, fast_messages=self.fast)
 
@@ -191,7 +195,6 @@ class CdrJointStateDecoder(_JointStateAccumulator):
         super().__init__(channel, source)
         self.layouts: dict[int, list[cdr.JointStateLayout]] = {}
         self._stock: Callable[[bytes], Any] | None = None
-        self.count = 0
 
     def add(self, buf: NDArray[np.uint8], starts: NDArray[np.int64], lengths: NDArray[np.int64],
             log_time: NDArray[np.int64]) -> None:
@@ -224,9 +227,9 @@ class CdrJointStateDecoder(_JointStateAccumulator):
                 sel = np.flatnonzero(hit)
                 batch = cdr.decode_joint_states(rows[sel] if sel.shape[0] < rows.shape[0]
                                                 else rows, layout)
-                self.add_block(layout.names, batch.stamp_ns, log_time[members[sel]],
-                               [batch.position, batch.velocity, batch.effort],
-                               base_index + int(members[sel[0]]))
+                self.add_block(layout.names, base_index + members[sel], batch.stamp_ns,
+                               log_time[members[sel]],
+                               [batch.position, batch.velocity, batch.effort])
                 self.fast += sel.shape[0]
                 todo &= ~hit
             for i in np.flatnonzero(todo).tolist():
@@ -247,8 +250,8 @@ class CdrJointStateDecoder(_JointStateAccumulator):
         except Exception as exc:
             raise self.error(f"message {index} cannot be decoded as {JOINT_STATE} "
                              f"({exc})") from None
-        self.add_block(names, np.array([stamp], np.int64), np.array([log_time], np.int64),
-                       fields, index)
+        self.add_block(names, np.array([index], np.int64), np.array([stamp], np.int64),
+                       np.array([log_time], np.int64), fields)
 
 
 def _json_list(decoder: TopicDecoder, buf: NDArray[np.uint8], starts: NDArray[np.int64],
@@ -267,10 +270,6 @@ def _json_list(decoder: TopicDecoder, buf: NDArray[np.uint8], starts: NDArray[np
 class JsonJointStateDecoder(_JointStateAccumulator):
     """JSON JointState (ROS field names), grouped by joint names into column blocks."""
 
-    def __init__(self, channel: ChannelInfo, source: str) -> None:
-        super().__init__(channel, source)
-        self.count = 0
-
     def add(self, buf: NDArray[np.uint8], starts: NDArray[np.int64], lengths: NDArray[np.int64],
             log_time: NDArray[np.int64]) -> None:
         values = _json_list(self, buf, starts, lengths)
@@ -286,8 +285,9 @@ class JsonJointStateDecoder(_JointStateAccumulator):
                                   + int(m["header"]["stamp"]["nanosec"]) for m in msgs], np.int64)
                 fields = [np.array([m.get(f) or [] for m in msgs], dtype=float).reshape(
                     len(msgs), -1) for f in ("position", "velocity", "effort")]
-                self.add_block(tuple(str(x) for x in names), stamp, log_time[members], fields,
-                               self.count + members[0])
+                self.add_block(tuple(str(x) for x in names),
+                               self.count + np.asarray(members, np.int64), stamp,
+                               log_time[members], fields)
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, LogFormatError):
                 raise

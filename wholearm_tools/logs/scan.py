@@ -9,6 +9,7 @@ scan records ``truncated=True`` and keeps every complete chunk before it.
 from __future__ import annotations
 
 import struct
+import zlib
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -223,6 +224,8 @@ def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
                         raise
                     except Exception as exc:
                         raise LogFormatError(f"{path}: corrupt chunk ({exc})") from None
+                    if record.uncompressed_crc and zlib.crc32(data) != record.uncompressed_crc:
+                        raise LogFormatError(f"{path}: corrupt chunk (CRC mismatch)")
                     scanner.add_chunk_data(data)
                 elif isinstance(record, Message):
                     pending.append(record)
@@ -244,8 +247,10 @@ def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
         except (EndOfFile, struct.error) as exc:
             scan.truncated = True
             scan.truncation = str(exc) or type(exc).__name__
-        except McapError as exc:
-            raise LogFormatError(f"{path}: corrupt MCAP ({exc})") from None
+        except LogFormatError:
+            raise
+        except (McapError, ValueError, OverflowError, MemoryError) as exc:
+            raise LogFormatError(f"{path}: corrupt MCAP ({type(exc).__name__}: {exc})") from None
         flush()
     if scan.truncated and scan.n_messages == 0:
         raise LogFormatError(f"{path}: truncated MCAP file with no readable message")

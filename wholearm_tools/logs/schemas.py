@@ -49,8 +49,8 @@ int32 sec
 uint32 nanosec
 """
 
-_JOINT_STATE = """# This is a message that holds data to describe the state of a set of torque controlled joints.
-#
+_JOINT_STATE = ("# This is a message that holds data to describe the state of a set of torque "
+                "controlled joints.\n" """#
 # The state of each joint (revolute or prismatic) is defined by:
 #  * the position of the joint (rad or m),
 #  * the velocity of the joint (rad/s or m/s) and
@@ -74,7 +74,7 @@ string[] name
 float64[] position
 float64[] velocity
 float64[] effort
-"""
+""")
 
 _DEPRECATED = """# This was originally provided as an example message.
 # It is deprecated as of Foxy
@@ -140,6 +140,7 @@ ROS2_DEFINITIONS: dict[str, str] = {
                           + _SEPARATOR + "MSG: std_msgs/MultiArrayDimension\n"
                           + _MULTI_ARRAY_DIMENSION),
 }
+ROS2_DEFINITIONS = {name: text.rstrip("\n") for name, text in ROS2_DEFINITIONS.items()}
 """``ros2msg`` schema text by schema name."""
 
 _NUMBERS = {"type": "array", "items": {"type": "number"}}

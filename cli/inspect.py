@@ -1,0 +1,65 @@
+"""``wholearm inspect RUN.mcap``: what a log contains (topics, joints, rates, run readiness)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from cli.options import json_option
+
+
+def _yes(value: object) -> str:
+    return "yes" if value else "no"
+
+
+@click.command("inspect")
+@click.argument("run", type=click.Path(dir_okay=False, path_type=Path))
+@json_option
+@click.option("--joint-topic", default=None, metavar="TOPIC",
+              help="JointState topic to describe (default /joint_states or the only one).")
+def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
+    """Describe the MCAP log RUN: topics, joints, duration, rates, URDF, commands, truth."""
+    from wholearm_tools.logs.inspect import inspect_log
+
+    info = inspect_log(run, joint_topic=joint_topic)
+    if as_json:
+        click.echo(json.dumps(info, indent=2, sort_keys=True))
+        return
+    out = [f"file:      {info['file']}",
+           f"profile:   {info['profile'] or '?'} (MCAP profile {info['mcap_profile']!r}, "
+           f"written by {info['library'] or '?'})",
+           f"duration:  {info['duration_s']:.3f} s, {info['messages']} messages"
+           + ("  [TRUNCATED: read up to the cut]" if info["truncated"] else ""),
+           "topics:"]
+    width = max((len(t["topic"]) for t in info["topics"]), default=0)
+    for t in info["topics"]:
+        rate = f"{t['rate_hz']:>8.2f} Hz" if t["messages"] > 1 else f"{'-':>8}   "
+        out.append(f"  {t['topic']:<{width}}  {t['messages']:>8} msgs  {rate}"
+                   f"  {t['schema'] or '-'} ({t['message_encoding']})")
+    for topic, jt in info["joint_topics"].items():
+        fields = ", ".join(f for f in ("velocity", "effort") if jt[f]) or "positions only"
+        mark = "*" if topic == info["joint_topic"] else " "
+        out.append(f"{mark} joints on {topic}: {', '.join(jt['joints'])} ({fields})")
+    if info["joint_topic"] is None and len(info["joint_topics"]) > 1:
+        out.append("  several JointState topics: choose one with --joint-topic")
+    robot = info["robot"]
+    urdf = _yes(info["urdf"])
+    if robot and "error" in robot:
+        urdf += f" (unusable: {robot['error']})"
+    elif robot:
+        urdf += f" (robot {robot['name']!r}, {len(robot['joints'])} joints)"
+    out.append(f"URDF:      {urdf}")
+    cmd = info["commands"]
+    out.append("commands:  " + (f"{cmd['topic']} ({cmd['schema']}; torques "
+                                f"{_yes(cmd['torques'])}, positions {_yes(cmd['positions'])})"
+                                if cmd else "no"))
+    gt = info["ground_truth"]
+    out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body),"
+                                f" {gt['surfaces']} surfaces" if gt else "no"))
+    if info["metadata"]:
+        out.append(f"metadata:  {', '.join(info['metadata'])}")
+    if info["attachments"]:
+        out.append(f"attachments: {', '.join(info['attachments'])}")
+    click.echo("\n".join(out))
