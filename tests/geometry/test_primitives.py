@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -221,7 +221,8 @@ def test_single_point_gives_scalar_shaped_results(kind: str) -> None:
     assert prim.gradient(p).shape == (prim.dim,)
     assert prim.closest_point(p).shape == (prim.dim,)
     val, t = prim.segment_signed_distance(p, p + 0.5)
-    assert val.shape == () and t.shape == ()
+    assert val.shape == ()
+    assert t.shape == ()
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -297,7 +298,7 @@ def test_capsule_clearance_subtracts_radius() -> None:
     np.testing.assert_allclose(t, [0.5, 0.0])
     val, _ = capsule_clearance(sph, a, b, np.array([0.1, 0.2]), 1)
     np.testing.assert_allclose(val, [0.9, 1.8])
-    with pytest.raises(InputError, match="-0.1"):
+    with pytest.raises(InputError, match=r"-0\.1"):
         capsule_clearance(sph, a, b, -0.1, 1)
     with pytest.raises(InputError, match="shape"):
         capsule_clearance(sph, a, b, np.ones(3), 1)
@@ -334,7 +335,7 @@ def test_invalid_queries_raise_input_error() -> None:
         sph.signed_distance(np.zeros((4, 2)))
     with pytest.raises(InputError, match="NaN"):
         sph.gradient([[0, 0, np.nan]])
-    with pytest.raises(InputError, match="free_side must be \\+1 or -1, got 0.5"):
+    with pytest.raises(InputError, match=r"free_side must be \+1 or -1, got 0.5"):
         sph.segment_signed_distance([0, 0, 0], [1, 0, 0], 0.5)
     with pytest.raises(InputError, match="3 vs 2"):
         sph.segment_signed_distance(np.zeros((3, 3)), np.zeros((2, 3)))

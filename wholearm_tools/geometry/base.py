@@ -164,15 +164,16 @@ def squeeze2(
 
 def segment_min_numeric(
     fn: Callable[[FloatArray], FloatArray], a: FloatArray, b: FloatArray,
-    samples: int = 33, levels: int = 6, points_per_level: int = 17,
+    samples: int = 33, levels: int = 3, points_per_level: int = 65,
 ) -> tuple[FloatArray, FloatArray]:
     """Minimise ``fn`` along the segments ``a[i]–b[i]`` (validated ``(N, d)`` arrays).
 
     ``fn`` maps ``(M, d)`` points to ``(M,)`` values.  The segments are sampled at ``samples``
     evenly spaced parameters, then the best sample's neighbourhood ``[t - h, t + h]`` (``h`` one
     sample spacing) is resampled ``levels`` times with ``points_per_level`` points, the bracket
-    shrinking by ``(points_per_level - 1) / 2`` each time (8x with the defaults, so the final
-    bracket is ``1/32 / 8**6 ~ 1e-7`` of the segment).  Every level is one vectorised ``fn`` call.
+    shrinking by ``(points_per_level - 1) / 2`` each time (32x with the defaults, so the final
+    half-bracket is ``1/32 / 32**3 ~ 1e-6`` of the segment).  Every level is one vectorised ``fn``
+    call (four calls in all): for small ``N`` the cost is the number of calls, not of points.
 
     Guarantees: for a function that is unimodal along the segment (e.g. a convex signed distance)
     the global minimum is found to the final bracket.  Otherwise the local minimum around the best
@@ -293,7 +294,7 @@ def primitive_from_dict(data: Mapping[str, Any]) -> Primitive:
 
 def _segment_min_numeric(
     fn: Callable[[FloatArray], FloatArray], a: ArrayLike, b: ArrayLike, dim: int,
-    samples: int = 33, iterations: int = 6,
+    samples: int = 33, iterations: int = 3,
 ) -> tuple[FloatArray, FloatArray]:
     """Backwards-compatible wrapper: validate ``a``, ``b`` then :func:`segment_min_numeric`."""
     a_, b_, _ = as_segments(a, b, dim)

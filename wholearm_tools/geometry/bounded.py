@@ -27,7 +27,7 @@ surface, negative inside the material.  What the solid is, and how exact the cle
 
 ``segment_clearance`` minimises the clearance along segments: closed form for :class:`Surface`
 (see the primitive types), numeric for bounded obstacles
-(:func:`~wholearm_tools.geometry.base.segment_min_numeric`, accurate to ~1e-7 of the segment
+(:func:`~wholearm_tools.geometry.base.segment_min_numeric`, accurate to ~1e-6 of the segment
 length around the best of 33 samples).  All clearances are 1-Lipschitz.
 """
 
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
+from typing import Any, ClassVar, Protocol, TypeVar, cast, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -88,10 +88,10 @@ class Obstacle(Protocol):
 
 OBSTACLE_TYPES: dict[str, type[Any]] = {}
 
-O = TypeVar("O", bound=type[Any])
+ObstacleT = TypeVar("ObstacleT", bound=type[Any])
 
 
-def register_obstacle(cls: O) -> O:
+def register_obstacle(cls: ObstacleT) -> ObstacleT:
     """Class decorator: add an obstacle type to :data:`OBSTACLE_TYPES` under ``cls.type_name``."""
     if cls.type_name in OBSTACLE_TYPES:
         raise RuntimeError(f"obstacle type {cls.type_name!r} registered twice")
@@ -159,9 +159,9 @@ def _angle_range(value: Any, name: str = "angle_range") -> tuple[float, float] |
 
 def _box_sdf(*d: FloatArray) -> FloatArray:
     """Exact signed distance to an axis-aligned box from per-axis ``d_i = max(lo - x, x - hi)``."""
-    outside = np.sqrt(sum(np.maximum(di, 0.0) ** 2 for di in d))
-    inside = np.minimum(np.maximum.reduce(d) if len(d) > 1 else d[0], 0.0)
-    return outside + inside
+    D = np.stack(d, axis=1)
+    pos = np.maximum(D, 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", pos, pos)) + np.minimum(D.max(axis=1), 0.0)
 
 
 def _interval(x: FloatArray, lo: float, hi: float) -> FloatArray:
@@ -476,24 +476,19 @@ class CylinderSection(_Numeric):
         return (self.primitive,)
 
     def bounds(self) -> dict[str, Any]:
-        assert self.s_range is not None and self.ref is not None
-        return {"s_range": _range_json(self.s_range),
+        return {"s_range": _range_json(cast(tuple[float, float], self.s_range)),
                 "angle_range": None if self.angle_range is None else list(self.angle_range),
-                "ref": self.ref.tolist(), "thickness": self.thickness}
+                "ref": cast(FloatArray, self.ref).tolist(), "thickness": self.thickness}
 
     def _clear(self, p: FloatArray) -> FloatArray:
-        assert self.s_range is not None and self.ref is not None
         q = p - self.point
         h = q @ self.axis
-        x = q @ self.ref
+        x = q @ cast(FloatArray, self.ref)
         y = q @ self._w
         rho = np.hypot(x, y)
         dr = _radial_interval(rho, self.radius, self.free_side, self.thickness)
-        s0, s1 = self.s_range
-        if np.isinf(s0) and np.isinf(s1):
-            c = dr
-        else:
-            c = _box_sdf(dr, _interval(h, s0, s1))
+        s0, s1 = cast(tuple[float, float], self.s_range)
+        c = dr if np.isinf(s0) and np.isinf(s1) else _box_sdf(dr, _interval(h, s0, s1))
         if self.angle_range is not None:
             c = np.maximum(c, _wedge_sdf(np.arctan2(y, x), rho, self.angle_range))
         return c
@@ -626,9 +621,10 @@ class CylinderJunction(_Numeric):
         set_(self, "main_range", _range(self.main_range, "main_range"))
         set_(self, "branch_range", _range(self.branch_range, "branch_range"))
         set_(self, "surface_id", _surface_id(self.surface_id))
-        assert self.main_range is not None and self.branch_range is not None
-        set_(self, "_main_clear", _bore_clearance(self.main, self.main_range))
-        set_(self, "_branch_clear", _bore_clearance(self.branch, self.branch_range))
+        set_(self, "_main_clear",
+             _bore_clearance(self.main, cast(tuple[float, float], self.main_range)))
+        set_(self, "_branch_clear",
+             _bore_clearance(self.branch, cast(tuple[float, float], self.branch_range)))
 
     @classmethod
     def lateral(
@@ -661,9 +657,8 @@ class CylinderJunction(_Numeric):
         return (self.main, self.branch)
 
     def bounds(self) -> dict[str, Any]:
-        assert self.main_range is not None and self.branch_range is not None
-        return {"main_range": _range_json(self.main_range),
-                "branch_range": _range_json(self.branch_range)}
+        return {"main_range": _range_json(cast(tuple[float, float], self.main_range)),
+                "branch_range": _range_json(cast(tuple[float, float], self.branch_range))}
 
     def _clear(self, p: FloatArray) -> FloatArray:
         return np.maximum(self._main_clear(p), self._branch_clear(p))

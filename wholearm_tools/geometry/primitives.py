@@ -357,7 +357,7 @@ class Cone(_Exact):
     ``sd = rho cos a - h sin a`` where the projection ``s = rho sin a + h cos a`` is positive,
     else the distance to the apex (that region lies behind the apex, always outside).  Negative
     inside.  Segment clearance: inside the cone (``free_side=-1``) at an end point (the signed
-    distance of a convex set is convex); outside, numeric but exact to ~1e-7 because the convex
+    distance of a convex set is convex); outside, numeric but exact to ~1e-6 because the convex
     signed distance is unimodal along a segment.
     """
 
