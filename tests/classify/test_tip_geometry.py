@@ -75,7 +75,8 @@ def test_tip_pushed_into_a_wall_is_a_tip_contact():
     robot, log, idx = tip_push_run(False)
     cl = tip_probability(Run(robot, log), contact_at(log, idx, 1), 0.02)
     assert cl.p_tip[0] > 0.5
-    assert 0.0 <= cl.p_tip_swept[0] <= 1.0 and cl.p_tip_swept[0] > 0.5
+    assert 0.0 <= cl.p_tip_swept[0] <= 1.0
+    assert cl.p_tip_swept[0] > 0.5
 
 
 def test_link_swept_sideways_into_a_post_is_a_link_contact():
@@ -118,7 +119,8 @@ def test_swept_map_marks_the_capsules_and_first_times():
     assert f[0] < f[1]
     # a point 3 cm outside the arm's reach is not swept, but is within 4 cm of swept cells
     far = [[0.0, 0.83]]
-    assert smap.first_at(far)[0] == NEVER and smap.first_within(far, 0.04)[0] != NEVER
+    assert smap.first_at(far)[0] == NEVER
+    assert smap.first_within(far, 0.04)[0] != NEVER
 
 
 def test_bad_inputs_raise():
@@ -141,4 +143,5 @@ def test_no_contacts_classify_to_empty_records():
     robot, log, _ = side_swipe_run(False)
     empty = Contacts([], [], [], np.zeros((0, 2)), np.zeros((0, 2)), [], np.ones(2), np.ones(2))
     cl = tip_probability(Run(robot, log), empty, 0.02)
-    assert len(cl) == 0 and cl.label.shape == (0,)
+    assert len(cl) == 0
+    assert cl.label.shape == (0,)

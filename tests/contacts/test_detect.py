@@ -23,7 +23,7 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     dt = 1.0 / rate
     q = np.zeros(n)
     qc = np.zeros(n)
-    rows_q, rows_qd, rows_tau, rows_qc = [], [], [], []
+    rows_q, rows_qd, _rows_tau, rows_qc = [], [], [], []
     t = 0.0
     ts = []
 
@@ -81,9 +81,11 @@ def test_single_contacts_identify_the_link():
     c = detect_contacts(log)
     assert isinstance(c, Contacts)
     assert c.link.tolist() == [1, 2, 0]
-    assert c.q.shape == (3, 3) and c.qd_before.shape == (3, 3)
+    assert c.q.shape == (3, 3)
+    assert c.qd_before.shape == (3, 3)
     # contact times: within 40 ms after the block instants
-    assert np.all(np.diff(c.t) > 0) and np.all(c.t_end > c.t)
+    assert np.all(np.diff(c.t) > 0)
+    assert np.all(c.t_end > c.t)
     # motion just before the stop is positive on the joints that moved
     assert np.all(c.qd_before[0, :2] > 0.3)
 
@@ -117,7 +119,9 @@ def test_noisy_50hz_log_with_differentiated_velocity():
 def test_empty_contacts_are_well_formed():
     log = impedance_log([([0.3, 0.2, 0.1], {})])
     c = detect_contacts(log)
-    assert len(c) == 0 and c.q.shape == (0, 3) and c.qd_before.shape == (0, 3)
+    assert len(c) == 0
+    assert c.q.shape == (0, 3)
+    assert c.qd_before.shape == (0, 3)
     assert c.select(np.zeros(0, bool)).link.shape == (0,)
 
 

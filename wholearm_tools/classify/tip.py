@@ -307,7 +307,7 @@ def _resolve(run_or_log: Run | JointLog, robot: RobotModel | None
     raise InputError(f"expected a Run or a JointLog, got {type(run_or_log).__name__}")
 
 
-def _check_B(B: float) -> float:
+def _check_b(B: float) -> float:
     B = float(B)
     if not np.isfinite(B) or B <= 0:
         raise InputError(f"B must be a positive length in metres, got {B}")
@@ -324,7 +324,7 @@ class TipEvaluator:
     def __init__(self, robot: RobotModel, log: JointLog, contacts: Contacts, B: float, *,
                  grid: SweptMap | None = None, params: ClassifyParams | None = None) -> None:
         self.params = params or ClassifyParams()
-        self.B = _check_B(B)
+        self.B = _check_b(B)
         self.robot = robot
         if contacts.n_joints != robot.dof:
             raise InputError(f"contacts have {contacts.n_joints} joints, robot {robot.dof}")

@@ -7,6 +7,7 @@ from wholearm_tools.contacts.detect import (
     detect_contacts,
     estimate_noise,
 )
+from wholearm_tools.contacts.truth import match_truth
 
 __all__ = ["Contacts", "DetectionParams", "contact_link_per_sample", "detect_contacts",
-           "estimate_noise"]
+           "estimate_noise", "match_truth"]

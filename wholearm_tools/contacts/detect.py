@@ -14,7 +14,9 @@ runs on a 500 Hz simulated log and on a noisier 50 Hz real one:
   estimate ``MAD(diff qd) / sqrt(2)`` and floored by the encoder quantum / sample period;
 * torque noise ``sigma_tau[j]``: the same estimator applied to ``tau_cmd`` on the samples where
   the whole arm is at rest (targets reached and contacts both qualify; the contact torques are the
-  outliers the clipping removes).
+  outliers the clipping removes), floored by half the torque resolution (5th percentile of the
+  non-zero sample-to-sample torque steps: a quantised encoder moves the torque in steps of
+  ``K * quantum``).
 
 ``stopped = |qd_smooth| < k_velocity * sigma_v``, ``loaded = |tau_cmd| > k_torque * sigma_tau``,
 and a state must last ``max(min_stop_time, min_stop_samples / rate)`` to count.
@@ -226,6 +228,13 @@ def estimate_noise(log: JointLog, params: DetectionParams | None = None
     tau = np.asarray(log.tau_cmd)
     start = _white_scale(tau[rest]) if np.count_nonzero(rest) >= 3 else _white_scale(tau)
     sigma_tau = _clipped_scale(tau, np.maximum(start, 1e-9), mask=rest if np.any(rest) else None)
+    # floor: half the torque resolution (a quantised encoder makes tau move in steps; with a
+    # perfectly quiet arm the scale above collapses to zero)
+    dtau = np.abs(np.diff(tau, axis=0))
+    big = 1e-6 * np.maximum(np.abs(tau).max(axis=0), 1e-12)
+    tau_floor = np.array([0.5 * np.percentile(c[c > b], 5) if np.any(c > b) else 1e-9
+                          for c, b in zip(dtau.T, big, strict=True)])
+    sigma_tau = np.maximum(sigma_tau, tau_floor)
     return sigma_v, sigma_tau, qd
 
 

@@ -1,0 +1,97 @@
+"""Contact detection and tip/link classification accuracy on every bundled scenario.
+
+Run: ``.venv/bin/python benchmarks/bench_classify.py [--seeds 3] [--duration 40]
+[--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar]``
+
+For every scenario × seed the run is simulated in process; for every B the contacts are
+classified offline (whole-run map) and causally (map up to each contact).  Columns:
+
+* ``det``: detected / true contacts; ``link%``: detections whose link equals the matched true
+  contact's link (unmatched detections count as wrong);
+* ``lab%``: tip/link labels that agree with the truth among the contacts labelled (not
+  ambiguous), offline; ``amb%``: ambiguous fraction, offline; ``lab%c``/``amb%c``: causal;
+* ``|P-T| off`` / ``|P-T| cau``: mean |P_T − truth| (truth 1 for tip/joint, 0 for body);
+* ``s``: seconds spent in detection + classification (both modes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from wholearm_tools.classify import swept_map, tip_probability
+from wholearm_tools.contacts import detect_contacts, match_truth
+from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
+
+
+def evaluate(run, B):
+    t0 = time.perf_counter()
+    contacts = detect_contacts(run.log, run.robot)
+    grid = swept_map(run.robot, run.log.q, B=B)
+    off = tip_probability(run, contacts, B, grid=grid)
+    cau = tip_probability(run, contacts, B, grid=grid, causal=True)
+    secs = time.perf_counter() - t0
+    truth = run.truth
+    m = match_truth(contacts, truth)
+    ok = m >= 0
+    true_link = np.where(ok, truth.contact_link[np.maximum(m, 0)], -1)
+    true_tip = truth.is_tip[np.maximum(m, 0)].astype(float)
+    row = {"n_true": truth.n_contacts, "n_det": len(contacts),
+           "link_ok": int(np.sum(contacts.link == true_link)), "secs": secs}
+    for name, cl in (("off", off), ("cau", cau)):
+        lab = ok & (cl.label != "ambiguous")
+        row[f"labelled_{name}"] = int(lab.sum())
+        row[f"label_ok_{name}"] = int(np.sum((cl.label == "tip")[lab] == (true_tip[lab] > 0.5)))
+        row[f"amb_{name}"] = int(np.sum(ok & (cl.label == "ambiguous")))
+        row[f"err_{name}"] = float(np.sum(np.abs(cl.p_tip - true_tip)[ok]))
+        row["matched"] = int(ok.sum())
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=40.0)
+    ap.add_argument("--B", type=float, nargs="+", default=[0.01, 0.02, 0.04])
+    ap.add_argument("--scenarios", nargs="+", default=None)
+    args = ap.parse_args()
+    names = args.scenarios or list_scenarios()
+    head = (f"{'scenario':<14} {'B':>5} {'det':>9} {'link%':>6} {'lab%':>6} {'amb%':>5} "
+            f"{'lab%c':>6} {'amb%c':>5} {'|P-T| off':>9} {'|P-T| cau':>9} {'s':>5}")
+    print(head)
+    print("-" * len(head))
+    total: dict[float, dict[str, float]] = {}
+    for name in names:
+        sc = load_scenario(name)
+        runs = [sc.simulate(seed=s, duration=args.duration).run for s in range(args.seeds)]
+        for B in args.B:
+            rows = [evaluate(run, B) for run in runs]
+            agg = {k: sum(r[k] for r in rows) for k in rows[0]}
+            acc = total.setdefault(B, dict.fromkeys(agg, 0.0))
+            for k, v in agg.items():
+                acc[k] += v
+            print(_line(name, B, agg))
+    print("-" * len(head))
+    for B, agg in total.items():
+        print(_line("ALL", B, agg))
+
+
+def _pct(a: float, b: float) -> str:
+    return f"{100 * a / b:6.1f}" if b else f"{'-':>6}"
+
+
+def _line(name: str, B: float, a: dict[str, float]) -> str:
+    matched = max(a["matched"], 1)
+    return (f"{name:<14} {B:>5.3f} {int(a['n_det']):>4}/{int(a['n_true']):<4} "
+            f"{_pct(a['link_ok'], max(a['n_det'], a['n_true'])):>6} "
+            f"{_pct(a['label_ok_off'], a['labelled_off'])} "
+            f"{100 * a['amb_off'] / matched:5.1f} "
+            f"{_pct(a['label_ok_cau'], a['labelled_cau'])} "
+            f"{100 * a['amb_cau'] / matched:5.1f} "
+            f"{a['err_off'] / matched:>9.3f} {a['err_cau'] / matched:>9.3f} {a['secs']:>5.1f}")
+
+
+if __name__ == "__main__":
+    main()
