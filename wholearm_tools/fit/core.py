@@ -1,0 +1,687 @@
+"""Single-primitive fits with CasADi/IPOPT (eq. 3 of the paper, tip and link residuals).
+
+Problem
+-------
+For tip contact ``i`` (sphere centre ``P_i``, radius ``w_i``) and link contact ``j`` (axis segment
+``a_j b_j``, capsule radius ``w_j``), with ``s`` the free side (+1 free space outside / on the
+normal side, -1 inside) and ``sd`` the signed distance of the primitive::
+
+    r_i = s * sd(P_i)                     - w_i
+    r_j = s * sd(a_j + t_j (b_j - a_j))   - w_j      t_j in [0, 1] latent
+
+    minimise  sum_i W_i rho(r_i) + sum_j W_j rho(r_j)   over (theta, t)
+
+``s * sd`` is the clearance; because the robot is always on the free side, it is smooth where the
+data are (the unsigned distance is not, at the surface).  The latent ``t_j`` is constrained to be
+a stationary point of the clearance along the link (``d clearance / d t_j = 0``), i.e. the
+tangency point, so that a link touching the surface gives information: without the constraint
+any surface *crossing* the offset of a segment would give a zero residual.  Links whose least
+clearance lies at an end point (always so for lines and planes, and inside concave surfaces) or
+along a flat stretch have ``t_j`` fixed there instead; the active set is checked against an exact
+numeric minimisation after each solve and the solve repeated when it changed.
+
+Numerics
+--------
+Data are normalised (centroid at the origin, unit RMS spread) and weights to mean 1.  The NLP is
+one vectorised MX graph per ``(kind, loss, tip bucket, link bucket, max_iter)``, expanded to SX,
+built once and cached; the data are parameters.  Sizes are padded to buckets (duplicate contacts
+with zero weight) so that segmentation re-uses a handful of graphs.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+import scipy.stats
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.models import (
+    CA_OPS,
+    MODELS,
+    InitContext,
+    Model,
+    segment_min,
+    signed_distance_np,
+)
+from wholearm_tools.fit.result import FitResult
+
+LOSSES = ("linear", "huber", "cauchy")
+_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+_T_EDGE = 1e-6
+_FLAT = 1e-6
+
+
+def _bucket(n: int) -> int:
+    """Padded problem size: 0, then 4, 6, 8, 12, 16, 24, ... (<= 1.5x the request)."""
+    if n == 0:
+        return 0
+    b = 4
+    while b < n:
+        b = b * 3 // 2 if (b & (b - 1)) == 0 else (b // 3) * 4
+    return b
+
+
+def _rho_ca(z: Any, loss: str, delta: Any) -> Any:
+    if loss == "linear":
+        return 0.5 * z * z
+    u = z / delta
+    if loss == "huber":  # smooth (pseudo-)Huber: quadratic near 0, linear in the tails
+        return delta * delta * (ca.sqrt(1.0 + u * u) - 1.0)
+    return 0.5 * delta * delta * ca.log1p(u * u)  # cauchy
+
+
+def rho_np(z: np.ndarray, loss: str, delta: float) -> np.ndarray:
+    """Numpy loss ``rho(z)`` (same definitions as the NLP)."""
+    if loss == "linear":
+        return 0.5 * z * z
+    u = z / delta
+    if loss == "huber":
+        return delta * delta * (np.sqrt(1.0 + u * u) - 1.0)
+    return 0.5 * delta * delta * np.log1p(u * u)
+
+
+def _irls_weight(z: np.ndarray, loss: str, delta: float) -> np.ndarray:
+    """``rho'(z) / z`` — the effective Gauss-Newton weight of a robust loss."""
+    if loss == "linear":
+        return np.ones_like(z)
+    u = z / delta
+    if loss == "huber":
+        return 1.0 / np.sqrt(1.0 + u * u)
+    return 1.0 / (1.0 + u * u)
+
+
+def _symbols(kind: str, nt: int, nl: int) -> dict[str, Any]:
+    """Vectorised symbolic residuals of a problem shape (data are in the parameter vector)."""
+    m = MODELS[kind]
+    d = m.dim
+    th = ca.MX.sym("theta", m.n_raw)
+    t = ca.MX.sym("t", nl)
+    sizes = [nt * d, nt, nt, nl * d, nl * d, nl, nl, nl, nl, 1, 1]
+    P = ca.MX.sym("p", sum(sizes))
+    parts, k = [], 0
+    for s_ in sizes:
+        parts.append(P[k:k + s_])
+        k += s_
+    tp, tw, tsw, la, lb, lw, lsw, mask, tfix, side, delta = parts
+    ths = [th[i] for i in range(m.n_raw)]
+    zs = []
+    if nt:
+        T = ca.reshape(tp, nt, d)
+        cl = side * m.sd(CA_OPS, [T[:, j] for j in range(d)], ths)
+        zs.append(tsw * (cl - tw))
+    stat = []
+    if nl:
+        A = ca.reshape(la, nl, d)
+        B = ca.reshape(lb, nl, d)
+        L = [A[:, j] + t * (B[:, j] - A[:, j]) for j in range(d)]
+        cl = side * m.sd(CA_OPS, L, ths)
+        zs.append(lsw * (cl - lw))
+        dcl = ca.jtimes(cl, t, ca.DM.ones(nl))
+        stat.append(mask * dcl + (1.0 - mask) * (t - tfix))
+    return {"x": ca.vertcat(th, t), "th": th, "P": P, "z": ca.vertcat(*zs), "stat": stat,
+            "eq": m.eq(ths), "ineq": m.ineq(ths), "delta": delta}
+
+
+@functools.lru_cache(maxsize=128)
+def _problem(kind: str, loss: str, nt: int, nl: int, max_iter: int) -> Any:
+    """Build (once) the IPOPT solver for a problem shape and loss."""
+    S = _symbols(kind, nt, nl)
+    f = ca.sum1(_rho_ca(S["z"], loss, S["delta"]))
+    g = ca.vertcat(*S["eq"], *S["ineq"], *S["stat"])
+    opts = {
+        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iter, "ipopt.tol": 1e-12, "ipopt.acceptable_tol": 1e-9,
+        "ipopt.acceptable_iter": 10, "expand": True,
+    }
+    return ca.nlpsol(f"fit_{kind}_{loss}_{nt}_{nl}", "ipopt",
+                     {"x": S["x"], "p": S["P"], "f": f, "g": g}, opts)
+
+
+@functools.lru_cache(maxsize=128)
+def _jacobians(kind: str, nt: int, nl: int) -> tuple[Any, Any, int, int]:
+    """(x, p) -> (z, dz/dtheta) and theta -> d eq/d theta for a problem shape, plus the
+    numbers of equality and inequality constraints."""
+    m = MODELS[kind]
+    S = _symbols(kind, nt, nl)
+    zjac = ca.Function("zjac", [S["x"], S["P"]], [S["z"], ca.jacobian(S["z"], S["th"])]).expand()
+    eq = ca.vertcat(*S["eq"]) if S["eq"] else ca.MX(0, 1)
+    geq = ca.Function("geq", [S["th"]], [ca.jacobian(eq, S["th"]) if S["eq"]
+                                         else ca.MX(0, m.n_raw)]).expand()
+    return zjac, geq, len(S["eq"]), len(S["ineq"])
+
+
+# --------------------------------------------------------------------------- normalised data
+
+
+@dataclass(frozen=True)
+class _Norm:
+    """Data in normalised coordinates plus what is needed to go back to metres."""
+
+    mu: np.ndarray
+    scale: float
+    tip: np.ndarray
+    tip_w: np.ndarray
+    tip_wt: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    link_w: np.ndarray
+    link_wt: np.ndarray
+    free: np.ndarray
+
+
+def _normalise(data: FitData) -> _Norm | None:
+    pts = np.vstack([data.tip_points, data.link_a, data.link_b])
+    mu = pts.mean(axis=0)
+    scale = float(np.sqrt(np.mean(np.sum((pts - mu) ** 2, axis=1))))
+    if not scale > 1e-12 * (1.0 + float(np.abs(mu).max())):
+        return None
+    W = np.concatenate([data.tip_weight, data.link_weight])
+    wm = float(W.mean())
+    return _Norm(
+        mu, scale, (data.tip_points - mu) / scale, data.tip_radius / scale,
+        data.tip_weight / wm, (data.link_a - mu) / scale, (data.link_b - mu) / scale,
+        data.link_radius / scale, data.link_weight / wm, (data.free_points - mu) / scale,
+    )
+
+
+def _rank(points: np.ndarray) -> int:
+    c = points - points.mean(axis=0)
+    s = np.linalg.svd(c, compute_uv=False)
+    if s.size == 0 or s[0] <= 0:
+        return 0
+    return int(np.sum(s > 1e-7 * s[0]))
+
+
+# --------------------------------------------------------------------------- numeric residuals
+
+
+def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least clearance along each link: value, t and whether t is a smooth interior minimum."""
+    def fn(p: np.ndarray) -> np.ndarray:
+        return side * signed_distance_np(m, th, p)
+    val, t = segment_min(fn, a, b)
+    if m.linear or len(a) == 0:
+        return val, t, np.zeros(len(a), dtype=bool)
+    h = 1e-3
+    tl, tr = np.clip(t - h, 0, 1), np.clip(t + h, 0, 1)
+    d = b - a
+    fl = fn(a + tl[:, None] * d)
+    fr = fn(a + tr[:, None] * d)
+    L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-30)
+    curv = (fl + fr - 2.0 * val) / (h * h * L2)
+    interior = (t > _T_EDGE) & (t < 1 - _T_EDGE) & (curv > _FLAT)
+    return val, t, interior
+
+
+def _residuals_norm(m: Model, th: np.ndarray, side: float, nd: _Norm
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    rt = side * signed_distance_np(m, th, nd.tip) - nd.tip_w if len(nd.tip) else np.zeros(0)
+    val, t, interior = _link_min(m, th, side, nd.a, nd.b)
+    return rt, val - nd.link_w, t, interior
+
+
+def _cost_norm(m: Model, th: np.ndarray, side: float, nd: _Norm, loss: str, delta: float
+               ) -> float:
+    rt, rl, _, _ = _residuals_norm(m, th, side, nd)
+    z = np.concatenate([np.sqrt(nd.tip_wt) * rt, np.sqrt(nd.link_wt) * rl])
+    return float(np.sum(rho_np(z, loss, delta)))
+
+
+# --------------------------------------------------------------------------- one solve
+
+
+@dataclass
+class _Solve:
+    th: np.ndarray
+    t: np.ndarray
+    mask: np.ndarray
+    status: str
+    success: bool
+    iterations: int
+    cost: float
+
+
+def _pad(x: np.ndarray, n: int) -> np.ndarray:
+    if len(x) == n:
+        return x
+    reps = np.repeat(x[:1], n - len(x), axis=0)
+    return np.concatenate([x, reps], axis=0)
+
+
+def _solve(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, delta: float,
+           max_iter: int) -> _Solve:
+    nt, nl = len(nd.tip), len(nd.a)
+    bt, bl = _bucket(nt), _bucket(nl)
+    solver = _problem(m.kind, loss, bt, bl, max_iter)
+    _, _, n_eq, n_ineq = _jacobians(m.kind, bt, bl)
+    zt = np.zeros(bt - nt)
+    zl = np.zeros(bl - nl)
+    fixed = [
+        _pad(nd.tip, bt).ravel(order="F"), _pad(nd.tip_w, bt),
+        np.concatenate([np.sqrt(nd.tip_wt), zt]),
+        _pad(nd.a, bl).ravel(order="F"), _pad(nd.b, bl).ravel(order="F"), _pad(nd.link_w, bl),
+        np.concatenate([np.sqrt(nd.link_wt), zl]),
+    ]
+    lbg = np.concatenate([np.zeros(n_eq), np.zeros(n_ineq), np.zeros(bl)])
+    ubg = np.concatenate([np.zeros(n_eq), np.full(n_ineq, np.inf), np.zeros(bl)])
+    lbx = np.concatenate([m.lbx, np.zeros(bl)])
+    ubx = np.concatenate([m.ubx, np.ones(bl)])
+    th = np.clip(np.asarray(th0, float), np.array(m.lbx), np.array(m.ubx))
+    _, t, interior = _link_min(m, th, side, nd.a, nd.b)
+    iters = 0
+    status, ok = "not_run", False
+    for _ in range(5):
+        mask = np.concatenate([interior.astype(float), zl])
+        tfix = _pad(t, bl) if nl else np.zeros(bl)
+        p = np.concatenate([*fixed, mask, tfix, [side], [delta]])
+        x0 = np.concatenate([th, tfix])
+        sol = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        st = solver.stats()
+        iters += int(st.get("iter_count", 0))
+        status = str(st.get("return_status", "unknown"))
+        ok = status in _SUCCESS
+        x = np.asarray(sol["x"]).ravel()
+        if not np.all(np.isfinite(x)):
+            ok = False
+            status = status if not ok else "non_finite"
+            break
+        th = x[: m.n_raw]
+        t_sol = x[m.n_raw: m.n_raw + nl]
+        _, t_new, int_new = _link_min(m, th, side, nd.a, nd.b)
+        if not ok or nl == 0:
+            t = t_sol
+            break
+        moved = np.abs(t_new - t_sol) > 1e-5
+        if np.array_equal(int_new, interior) and not np.any(moved):
+            t = t_sol
+            break
+        t, interior = t_new, int_new
+    cost = _cost_norm(m, th, side, nd, loss, delta)
+    return _Solve(th, t, interior, status, ok, iters, cost)
+
+
+# --------------------------------------------------------------------------- covariance
+
+
+def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float
+                     ) -> np.ndarray:
+    """Covariance of the raw parameters (normalised units); NaN when not determined."""
+    nt, nl = len(nd.tip), len(nd.a)
+    bt, bl = _bucket(nt), _bucket(nl)
+    zjac, geq, n_eq, _ = _jacobians(m.kind, bt, bl)
+    n = nt + nl
+    if n <= m.dof:
+        return np.full((m.n_raw, m.n_raw), np.nan)
+    tfix = _pad(sol.t, bl) if nl else np.zeros(0)
+    p = np.concatenate([
+        _pad(nd.tip, bt).ravel(order="F"), _pad(nd.tip_w, bt),
+        np.concatenate([np.sqrt(nd.tip_wt), np.zeros(bt - nt)]),
+        _pad(nd.a, bl).ravel(order="F"), _pad(nd.b, bl).ravel(order="F"), _pad(nd.link_w, bl),
+        np.concatenate([np.sqrt(nd.link_wt), np.zeros(bl - nl)]),
+        np.zeros(bl), tfix, [side], [delta],
+    ])
+    z, J = zjac(np.concatenate([sol.th, tfix]), p)
+    z = np.asarray(z).ravel()
+    J = np.asarray(J)
+    keep = np.concatenate([np.arange(nt), bt + np.arange(nl)])
+    z, J = z[keep], J[keep]
+    # Gauss-Newton on the minimal parameterisation.  The latent t drop out of the Jacobian: at a
+    # stationary t the clearance does not change to first order with t (envelope theorem); at a
+    # fixed end point t does not move.
+    w_rob = _irls_weight(z, loss, delta)
+    if n_eq:
+        G = np.asarray(geq(sol.th))
+        Bn = scipy.linalg.null_space(G)
+    else:
+        Bn = np.eye(m.n_raw)
+    Jm = J @ Bn
+    H = Jm.T @ (w_rob[:, None] * Jm)
+    s2 = float(np.sum(w_rob * z * z) / (n - m.dof))
+    try:
+        cond = np.linalg.cond(H)
+        if not np.isfinite(cond) or cond > 1e14:
+            raise np.linalg.LinAlgError
+        Hi = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return np.full((m.n_raw, m.n_raw), np.nan)
+    return s2 * Bn @ Hi @ Bn.T
+
+
+def _param_map_jacobian(m: Model, th: np.ndarray) -> np.ndarray:
+    """d (flattened map params) / d raw, by central differences (normalised units)."""
+    def flat(x: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.atleast_1d(v) for v in m.to_params(x).values()])
+    base = flat(th)
+    J = np.zeros((len(base), m.n_raw))
+    for i in range(m.n_raw):
+        h = 1e-6 * max(1.0, abs(th[i]))
+        e = np.zeros(m.n_raw)
+        e[i] = h
+        J[:, i] = (flat(th + e) - flat(th - e)) / (2 * h)
+    return J
+
+
+def _denormalise(m: Model, params: dict[str, Any], nd: _Norm) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for spec in m.params:
+        v = params[spec.name]
+        if spec.role == "point":
+            out[spec.name] = nd.mu + nd.scale * np.asarray(v, float)
+        elif spec.role == "length":
+            out[spec.name] = float(v) * nd.scale
+        elif spec.role == "direction":
+            out[spec.name] = np.asarray(v, float) / np.linalg.norm(v)
+        else:
+            out[spec.name] = float(v)
+    return out
+
+
+def _labels(m: Model) -> tuple[tuple[str, ...], np.ndarray]:
+    labels, scales = [], []
+    for spec in m.params:
+        s = 1.0 if spec.role in ("direction", "angle") else -1.0
+        if spec.size == 1:
+            labels.append(spec.name)
+            scales.append(s)
+        else:
+            for i in range(spec.size):
+                labels.append(f"{spec.name}[{i}]")
+                scales.append(s)
+    return tuple(labels), np.array(scales)
+
+
+# --------------------------------------------------------------------------- free side
+
+
+def _votes(m: Model, th: np.ndarray, pts: np.ndarray, tol: float) -> tuple[int, int]:
+    """(number of points outside, number inside) by more than ``tol`` (normalised)."""
+    if len(pts) == 0:
+        return 0, 0
+    sd = signed_distance_np(m, th, pts)
+    return int(np.sum(sd > tol)), int(np.sum(sd < -tol))
+
+
+def _decide_side(m: Model, nd: _Norm) -> list[float]:
+    """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
+    link axes, which are in free space) all lie clearly on one side of the initial guess;
+    otherwise both, and :func:`_pick_side` decides on the fitted surfaces."""
+    ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
+    cands = [c for c in m.init(ctx) if np.all(np.isfinite(c))]
+    if not cands:
+        return [1.0, -1.0]
+    th = min(cands, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
+    for pts in (nd.free, np.vstack([nd.a, nd.b])):
+        if len(pts) == 0:
+            continue
+        out, inn = _votes(m, th, pts, 0.05)
+        if out + inn == len(pts) and (out == 0 or inn == 0):
+            return [1.0 if out else -1.0]
+        break
+    no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
+    if no_radius and len(nd.free) == 0:
+        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
+    return [1.0, -1.0]
+
+
+def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:
+    """Choose between the fits made with either free side: converged first, then the fewer
+    free-space hints (free points, link axes) on the wrong side of the fitted surface, then the
+    lower cost, then the side of the base-frame origin (where the robot stands), then +1."""
+    hints = np.vstack([nd.free, nd.a, nd.b])
+    origin = (-nd.mu / nd.scale)[None, :]
+
+    def key(side: float) -> tuple[float, ...]:
+        f = fits[side]
+        out, inn = _votes(m, f.th, hints, 0.01)
+        wrong = inn if side > 0 else out
+        o_out, o_in = _votes(m, f.th, origin, 0.05)
+        o_wrong = float(o_in if side > 0 else o_out)
+        return (0.0 if f.success else 1.0, float(wrong), 0.0, o_wrong, -side)
+
+    costs = {sd: fits[sd].cost for sd in fits}
+    k = {sd: list(key(sd)) for sd in fits}
+    lo = min(costs.values())
+    for sd in fits:  # cost only counts when clearly different
+        k[sd][2] = 0.0 if costs[sd] <= 1.5 * lo + 1e-14 else 1.0
+    return min(fits, key=lambda sd: tuple(k[sd]))
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def fit_primitive(
+    kind: str,
+    data: FitData,
+    *,
+    free_side: float | None = None,
+    loss: str = "linear",
+    loss_scale: float = 2.0,
+    noise: float | None = None,
+    initial: dict[str, Any] | None = None,
+    max_iter: int = 200,
+) -> FitResult:
+    """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
+
+    Parameters
+    ----------
+    kind : str
+        ``"line"``, ``"circle"`` (2-D data) or ``"plane"``, ``"sphere"``, ``"cylinder"``,
+        ``"cone"``, ``"torus"`` (3-D data).
+    data : FitData
+    free_side : +1, -1 or None
+        Which side of a closed surface is free space (+1 outside, -1 inside).  None decides
+        from ``data.free_points`` and the link axes (which are in free space) against the
+        initial guess, or, when they are not conclusive, fits both sides and keeps the one
+        with fewer hints on the wrong side, then lower cost, then the side of the base-frame
+        origin.  Ignored for lines and planes, whose fitted normal points to free space.
+    loss : "linear", "huber" or "cauchy"
+        Robust losses are smooth: pseudo-Huber ``d^2 (sqrt(1 + (z/d)^2) - 1)`` and Cauchy
+        ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.
+    loss_scale : float
+        ``d`` in units of ``noise``.
+    noise : float or None
+        Residual noise level sigma in metres (used by robust losses); None estimates it from a
+        linear fit (1.4826 x median absolute weighted residual).
+    initial : dict or None
+        Initial map.json parameters; default algebraic guesses (several starts for
+        cylinders, cones and tori).
+    max_iter : int
+        IPOPT iteration limit per solve.
+
+    Returns
+    -------
+    FitResult
+        Falsy (with ``message``) for too few contacts, degenerate data or no convergence.
+
+    Raises
+    ------
+    InputError
+        Unknown ``kind``, data of the wrong dimension, invalid options.
+    """
+    if kind not in MODELS:
+        raise InputError(f"unknown primitive type {kind!r} (known: {', '.join(sorted(MODELS))})")
+    if not isinstance(data, FitData):
+        raise InputError(f"data must be a FitData, got {type(data).__name__}")
+    m = MODELS[kind]
+    if data.dim != m.dim:
+        raise InputError(f"a {kind} needs {m.dim}-D data, got {data.dim}-D points")
+    if loss not in LOSSES:
+        raise InputError(f"loss must be one of {LOSSES}, got {loss!r}")
+    if free_side is not None and free_side not in (1, -1):
+        raise InputError(f"free_side must be +1, -1 or None, got {free_side!r}")
+    if not (loss_scale > 0 and math.isfinite(loss_scale)):
+        raise InputError(f"loss_scale must be positive, got {loss_scale!r}")
+    if noise is not None and not (noise > 0 and math.isfinite(noise)):
+        raise InputError(f"noise must be positive, got {noise!r}")
+    if int(max_iter) < 1:
+        raise InputError(f"max_iter must be >= 1, got {max_iter!r}")
+
+    labels, _ = _labels(m)
+    n = data.n_contacts
+
+    def fail(status: str, msg: str) -> FitResult:
+        return FitResult(kind=kind, success=False, message=msg, status=status,
+                         param_labels=labels, tip_residuals=np.full(data.n_tip, np.nan),
+                         link_residuals=np.full(data.n_link, np.nan),
+                         link_t=np.full(data.n_link, np.nan))
+
+    if n < m.dof:
+        return fail("too_few_contacts",
+                    f"too few contacts for a {kind}: {n} given, at least {m.dof} needed")
+    nd = _normalise(data)
+    if nd is None:
+        return fail("degenerate", "degenerate data: all contact points coincide")
+    rank = _rank(np.vstack([nd.tip, nd.a, nd.b]))
+    if rank < m.min_rank:
+        shape = {0: "coincide", 1: "are collinear", 2: "are coplanar"}[rank]
+        return fail("degenerate",
+                    f"degenerate data for a {kind}: all contact points {shape}")
+
+    # lines and planes: the free side is the side the fitted normal points to
+    given = free_side is not None and not m.linear
+    sides = [float(free_side)] if given else _decide_side(m, nd)
+    fits: dict[float, _Solve] = {}
+    deltas: dict[float, float] = {}
+    for side in sides:
+        ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
+        cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
+        cands = [c for c in cands if np.all(np.isfinite(c))]
+        scored = sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0))
+        for th0 in scored[: max(1, m.starts)]:
+            sol = _solve(m, nd, th0, side, "linear", 1.0, max_iter)
+            delta = loss_scale * (noise / nd.scale if noise else 1.0)
+            if loss != "linear" and sol.success:
+                if noise is None:
+                    rt, rl, _, _ = _residuals_norm(m, sol.th, side, nd)
+                    z = np.concatenate([np.sqrt(nd.tip_wt) * rt, np.sqrt(nd.link_wt) * rl])
+                    delta = loss_scale * max(1.4826 * float(np.median(np.abs(z))), 1e-9)
+                sol = _solve(m, nd, sol.th, side, loss, delta, max_iter)
+            best = fits.get(side)
+            if best is None or (not sol.success, sol.cost) < (not best.success, best.cost):
+                fits[side] = sol
+                deltas[side] = delta
+    if not fits:
+        return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
+    side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
+    return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
+                        ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
+                        <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
+                        and len(nd.free) + len(nd.a) == 0)
+
+
+def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
+    """Raw normalised vector from map.json parameters (used for user initial guesses)."""
+    def pt(name: str) -> np.ndarray:
+        return (np.asarray(params[name], float) - nd.mu) / nd.scale
+
+    def ln(name: str) -> float:
+        return float(params[name]) / nd.scale
+
+    def un(name: str) -> np.ndarray:
+        v = np.asarray(params[name], float)
+        return v / np.linalg.norm(v)
+    try:
+        if m.kind in ("line", "plane"):
+            nrm = un("normal") if m.kind == "plane" else (lambda d: np.array([-d[1], d[0]]))(
+                un("direction"))
+            return np.concatenate([nrm, [pt("point") @ nrm]])
+        if m.kind in ("circle", "sphere"):
+            return np.concatenate([pt("center"), [ln("radius")]])
+        if m.kind == "cylinder":
+            a = un("axis")
+            p = pt("point")
+            return np.concatenate([p - (p @ a) * a, a, [ln("radius")]])
+        if m.kind == "cone":
+            return np.concatenate([pt("apex"), un("axis"), [float(params["half_angle"])]])
+        return np.concatenate([pt("center"), un("axis"), [ln("major_radius"),
+                                                          ln("minor_radius")]])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"initial parameters for a {m.kind} are invalid: {exc}") from None
+
+
+def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
+                 delta: float, labels: tuple[str, ...], ambiguous: bool) -> FitResult:
+    th = sol.th.copy()
+    if m.linear and side < 0:  # report lines and planes with the normal towards free space
+        th[: m.dim] *= -1.0
+        th[m.dim] *= -1.0
+        side = 1.0
+    rt, rl, t, _ = _residuals_norm(m, th, side, nd)
+    rt_m, rl_m = rt * nd.scale, rl * nd.scale
+    params = _denormalise(m, m.to_params(th), nd)
+    # covariance (normalised raw) -> map params -> metres
+    cov_raw = _covariance_norm(m, nd, sol, side, loss, delta) if sol.success else None
+    cov = ci = None
+    ci95: dict[str, tuple[Any, Any]] = {}
+    if cov_raw is not None:
+        Mj = _param_map_jacobian(m, th)
+        _, roles = _labels(m)
+        D = np.where(roles < 0, nd.scale, 1.0)
+        cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
+        n = data.n_contacts
+        q = scipy.stats.t.ppf(0.975, n - m.dof) if n > m.dof else np.nan
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
+        k = 0
+        for spec in m.params:
+            v = params[spec.name]
+            if spec.size == 1:
+                ci95[spec.name] = (float(v - sd[k]), float(v + sd[k]))
+            else:
+                ci95[spec.name] = (v - sd[k:k + spec.size], v + sd[k:k + spec.size])
+            k += spec.size
+        ci = ci95
+    W = np.concatenate([data.tip_weight, data.link_weight])
+    W = W / W.mean()
+    r_all = np.concatenate([rt_m, rl_m])
+    cost = float(np.sum(rho_np(np.sqrt(W) * r_all, loss, delta * nd.scale)))
+    rms = float(np.sqrt(np.mean(r_all ** 2))) if r_all.size else float("nan")
+    prim, note = None, ""
+    if sol.success:
+        try:
+            from wholearm_tools.geometry import primitive_type
+
+            prim = primitive_type(m.kind).from_params(params)
+        except Exception as exc:  # geometry rejects the parameters (e.g. a spindle torus)
+            note = f"; geometry object not built: {exc}"
+    msg = ("converged" if sol.success else
+           f"solver did not converge ({sol.status} after {sol.iterations} iterations)")
+    if sol.status == "Maximum_Iterations_Exceeded":
+        msg = f"maximum number of iterations reached ({sol.iterations})"
+    if ambiguous and sol.success:
+        msg += ("; free side not determined by the data (no free-space hints): assumed the "
+                "base-frame origin is in free space")
+    return FitResult(
+        kind=m.kind, success=sol.success, message=msg + note, status=sol.status,
+        iterations=sol.iterations, cost=cost, params=params, free_side=float(side),
+        covariance=cov, param_labels=labels, ci95=ci or {}, tip_residuals=rt_m,
+        link_residuals=rl_m, link_t=t, rms_residual=rms, primitive=prim,
+    )
+
+
+def residuals(kind: str, params: dict[str, Any], data: FitData, free_side: float
+              ) -> np.ndarray:
+    """Residuals ``clearance - w`` (tips then links, metres) of ``data`` under a primitive given
+    by its map.json parameters — the quantity the fit minimises."""
+    m = MODELS[kind]
+    nd = _Norm(np.zeros(m.dim), 1.0, data.tip_points, data.tip_radius, data.tip_weight,
+               data.link_a, data.link_b, data.link_radius, data.link_weight, data.free_points)
+    th = _raw_from_params(m, params, nd)
+    rt, rl, _, _ = _residuals_norm(m, th, float(free_side), nd)
+    return np.concatenate([rt, rl])
+
+
+def cost(kind: str, params: dict[str, Any], data: FitData, free_side: float,
+         loss: str = "linear", delta: float = 1.0) -> float:
+    """Objective value of a primitive on ``data`` (same definition as :attr:`FitResult.cost`)."""
+    r = residuals(kind, params, data, free_side)
+    W = np.concatenate([data.tip_weight, data.link_weight])
+    W = W / W.mean()
+    return float(np.sum(rho_np(np.sqrt(W) * r, loss, delta)))

@@ -1,0 +1,514 @@
+"""Fit models: the parameterisation, signed distance and initial guesses of each primitive type.
+
+One :class:`Model` per primitive type, registered in :data:`MODELS` by the map.json type name.
+Each model holds, in one place:
+
+* its **raw parameter vector** (what IPOPT optimises) with bounds and equality constraints that
+  remove singularities and gauge freedoms: unit vectors are plain 3-vectors constrained to
+  ``||n||^2 = 1``; the cylinder's axis point is constrained to be the point of the axis closest to
+  the data centroid; radii are bounded below by a small positive number; the cone half-angle lies
+  in ``(0, pi/2)``; a torus keeps ``major_radius > minor_radius``;
+* its **signed distance** written once against a tiny ``ops`` namespace so the *same* formula is
+  evaluated by numpy (residuals, growth, model selection) and built symbolically with CasADi (the
+  NLP); the sign conventions are those of :mod:`wholearm_tools.geometry.base` (negative inside
+  closed shapes, positive on the normal side of lines and planes);
+* the map from raw parameters to the **map.json parameters** (names of ARCHITECTURE.md);
+* **initial guesses** from algebraic fits (PCA lines/planes, Kasa circles/spheres, normal-based
+  cylinder/cone axes, meridian-circle torus) — a short list of candidates, best first.
+
+All geometry here is in *normalised* coordinates (data centroid at the origin, unit RMS spread);
+:mod:`wholearm_tools.fit.core` converts to and from metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+FloatArray = np.ndarray
+
+#: numpy backend of the distance formulas
+NP_OPS = SimpleNamespace(sqrt=np.sqrt, where=np.where, fmax=np.maximum, sin=np.sin, cos=np.cos)
+#: CasADi backend of the distance formulas (elementwise on MX/SX column vectors)
+CA_OPS = SimpleNamespace(sqrt=ca.sqrt, where=ca.if_else, fmax=ca.fmax, sin=ca.sin, cos=ca.cos)
+
+_R_MIN = 1e-7  # smallest radius (normalised units)
+_A_MIN = 1e-4  # cone half-angle margin from 0 and pi/2
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One map.json parameter: ``role`` is ``point`` (shifted and scaled back to metres),
+    ``length`` (scaled), ``direction`` or ``angle`` (unchanged)."""
+
+    name: str
+    size: int  # 1 for scalars
+    role: str
+
+
+@dataclass(frozen=True)
+class Model:
+    """Everything the fitter needs to know about one primitive type."""
+
+    kind: str
+    dim: int
+    dof: int
+    n_raw: int
+    #: (lower, upper) bounds of the raw vector
+    lbx: tuple[float, ...]
+    ubx: tuple[float, ...]
+    #: signed distance: ``sd(ops, cols, th) -> column``; ``cols`` = d coordinate columns
+    sd: Callable[[Any, Sequence[Any], Sequence[Any]], Any]
+    #: equality constraints ``g(th) = 0`` (list of scalar expressions; numpy or CasADi)
+    eq: Callable[[Sequence[Any]], list[Any]]
+    #: inequality constraints ``g(th) >= 0``
+    ineq: Callable[[Sequence[Any]], list[Any]]
+    #: raw -> map.json parameters (normalised units), numpy
+    to_params: Callable[[FloatArray], dict[str, Any]]
+    params: tuple[ParamSpec, ...]
+    #: initial guesses ``init(ctx) -> list of raw vectors`` (normalised units)
+    init: Callable[[InitContext], list[FloatArray]]
+    #: minimum rank of the centred contact point cloud for the type to be determined
+    min_rank: int
+    #: signed distance is linear along a segment (minimum always at an end point)
+    linear: bool = False
+    #: number of IPOPT starts tried (best initial guesses first)
+    starts: int = 1
+
+
+@dataclass(frozen=True)
+class InitContext:
+    """Normalised data handed to the initial-guess functions."""
+
+    tip: FloatArray  # (Nt, d)
+    tip_w: FloatArray  # (Nt,)
+    a: FloatArray  # (Nl, d)
+    b: FloatArray  # (Nl, d)
+    link_w: FloatArray  # (Nl,)
+    side: float  # +1 / -1
+
+    @property
+    def surface_points(self) -> FloatArray:
+        """Tip points and link midpoints, shape ``(N, d)`` (rough surface samples)."""
+        return np.vstack([self.tip, 0.5 * (self.a + self.b)])
+
+    @property
+    def offsets(self) -> FloatArray:
+        """Radius of each surface point in :attr:`surface_points` order."""
+        return np.concatenate([self.tip_w, self.link_w])
+
+    @property
+    def all_points(self) -> FloatArray:
+        return np.vstack([self.tip, self.a, self.b])
+
+
+MODELS: dict[str, Model] = {}
+
+
+def model(kind: str) -> Model:
+    """The fit model registered for ``kind``."""
+    return MODELS[kind]
+
+
+def _register(m: Model) -> Model:
+    MODELS[m.kind] = m
+    return m
+
+
+# --------------------------------------------------------------------------- algebraic helpers
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0 else np.eye(len(v))[0]
+
+
+def pca(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Centroid, singular values and principal directions (rows, largest first)."""
+    c = points.mean(axis=0)
+    _, s, vt = np.linalg.svd(points - c, full_matrices=False)
+    if vt.shape[0] < points.shape[1]:  # fewer points than dimensions
+        _, _, vt_full = np.linalg.svd(
+            np.vstack([points - c, np.zeros((points.shape[1], points.shape[1]))]))
+        vt = vt_full
+        s = np.concatenate([s, np.zeros(points.shape[1] - len(s))])
+    return c, s, vt
+
+
+def kasa(points: FloatArray) -> tuple[FloatArray, float]:
+    """Algebraic (Kasa) circle/sphere fit: centre and radius."""
+    A = np.hstack([2.0 * points, np.ones((len(points), 1))])
+    y = np.einsum("ij,ij->i", points, points)
+    sol, *_ = np.linalg.lstsq(A, y, rcond=None)
+    c = sol[:-1]
+    r2 = sol[-1] + c @ c
+    return c, float(np.sqrt(max(r2, 1e-12)))
+
+
+def local_normals(points: FloatArray, k: int = 8) -> FloatArray:
+    """Unoriented unit normals from the PCA of each point's ``k`` nearest neighbours."""
+    n, d = points.shape
+    k = min(k, n)
+    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
+    idx = np.argsort(dist, axis=1)[:, :k]
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    _, _, vt = np.linalg.svd(nb)
+    return vt[:, d - 1, :]
+
+
+def _perp_basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:
+    e = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    u = _unit(np.cross(axis, e))
+    return u, np.cross(axis, u)
+
+
+def refine_link_points(ctx: InitContext, sd_np: Callable[[FloatArray], FloatArray],
+                       side: float) -> FloatArray:
+    """Surface-point estimate per link: the segment point of least clearance under a guess."""
+    if len(ctx.a) == 0:
+        return np.zeros((0, ctx.tip.shape[1]))
+    _, t = segment_min(lambda p: side * sd_np(p), ctx.a, ctx.b)
+    return ctx.a + t[:, None] * (ctx.b - ctx.a)
+
+
+def segment_min(fn: Callable[[FloatArray], FloatArray], a: FloatArray, b: FloatArray,
+                samples: int = 25, iterations: int = 40) -> tuple[FloatArray, FloatArray]:
+    """Minimum of ``fn`` along segments ``a[i]-b[i]`` (sampling + golden section).
+
+    Returns ``(value (N,), t (N,))``.
+    """
+    n, d = a.shape
+    if n == 0:
+        return np.zeros(0), np.zeros(0)
+    ts = np.linspace(0.0, 1.0, samples)
+    pts = a[:, None, :] + ts[None, :, None] * (b - a)[:, None, :]
+    vals = fn(pts.reshape(-1, d)).reshape(n, samples)
+    k = np.argmin(vals, axis=1)
+    step = 1.0 / (samples - 1)
+    lo = np.clip(ts[k] - step, 0.0, 1.0)
+    hi = np.clip(ts[k] + step, 0.0, 1.0)
+    g = (np.sqrt(5.0) - 1.0) / 2.0
+
+    def f(t: FloatArray) -> FloatArray:
+        return fn(a + t[:, None] * (b - a))
+
+    x1 = hi - g * (hi - lo)
+    x2 = lo + g * (hi - lo)
+    f1, f2 = f(x1), f(x2)
+    for _ in range(iterations):
+        left = f1 < f2
+        hi = np.where(left, x2, hi)
+        lo = np.where(left, lo, x1)
+        nx1 = hi - g * (hi - lo)
+        nx2 = lo + g * (hi - lo)
+        # golden section reuses one evaluation; recomputing both keeps the code simple
+        x1, x2 = nx1, nx2
+        f1, f2 = f(x1), f(x2)
+    t = 0.5 * (lo + hi)
+    cand_t = np.stack([t, np.zeros(n), np.ones(n)], axis=1)
+    cand_v = np.stack([f(t), vals[:, 0], vals[:, -1]], axis=1)
+    j = np.argmin(cand_v, axis=1)
+    return cand_v[np.arange(n), j], cand_t[np.arange(n), j]
+
+
+def _no_constraints(th: Sequence[Any]) -> list[Any]:
+    return []
+
+
+def _unit_constraint(i: int, d: int) -> Callable[[Sequence[Any]], list[Any]]:
+    def eq(th: Sequence[Any]) -> list[Any]:
+        return [sum(th[i + j] * th[i + j] for j in range(d)) - 1.0]
+    return eq
+
+
+# --------------------------------------------------------------------------- line (2-D)
+# raw: n (2, unit normal), c (offset): sd = n . x - c
+
+
+def _line_sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+    return th[0] * X[0] + th[1] * X[1] - th[2]
+
+
+def _line_params(th: FloatArray) -> dict[str, Any]:
+    n = th[:2] / np.linalg.norm(th[:2])
+    return {"point": th[2] * n, "direction": np.array([n[1], -n[0]])}
+
+
+def _hyperplane_init(ctx: InitContext) -> list[FloatArray]:
+    _, _, vt = pca(ctx.all_points)
+    n = vt[-1]
+    # offset so that the contact centres sit at +w on the free side
+    surf = ctx.surface_points
+    c0 = float(np.mean(surf @ n - ctx.side * ctx.offsets))
+    return [np.concatenate([n, [c0]])]
+
+
+_register(Model(
+    kind="line", dim=2, dof=2, n_raw=3,
+    lbx=(-np.inf,) * 3, ubx=(np.inf,) * 3,
+    sd=_line_sd, eq=_unit_constraint(0, 2), ineq=_no_constraints,
+    to_params=_line_params,
+    params=(ParamSpec("point", 2, "point"), ParamSpec("direction", 2, "direction")),
+    init=_hyperplane_init, min_rank=1, linear=True,
+))
+
+
+# --------------------------------------------------------------------------- circle / sphere
+
+
+def _round_sd(d: int) -> Callable[[Any, Sequence[Any], Sequence[Any]], Any]:
+    def sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+        q = sum((X[j] - th[j]) * (X[j] - th[j]) for j in range(d))
+        return ops.sqrt(q) - th[d]
+    return sd
+
+
+def _round_params(d: int) -> Callable[[FloatArray], dict[str, Any]]:
+    def to_params(th: FloatArray) -> dict[str, Any]:
+        return {"center": th[:d].copy(), "radius": float(th[d])}
+    return to_params
+
+
+def _round_init(ctx: InitContext) -> list[FloatArray]:
+    d = ctx.tip.shape[1]
+    surf = ctx.surface_points
+    c, r = kasa(surf)
+    out = []
+    for _ in range(3):  # move link samples to their least-clearance points, refit
+        if len(ctx.a) == 0:
+            break
+        th = np.concatenate([c, [r]])
+        lp = refine_link_points(ctx, lambda p, th=th: _round_sd(d)(NP_OPS, p.T, th), ctx.side)
+        c, r = kasa(np.vstack([ctx.tip, lp]))
+    r_surf = r - ctx.side * float(np.mean(ctx.offsets))
+    out.append(np.concatenate([c, [max(r_surf, 10 * _R_MIN)]]))
+    return out
+
+
+for _kind, _d in (("circle", 2), ("sphere", 3)):
+    _register(Model(
+        kind=_kind, dim=_d, dof=_d + 1, n_raw=_d + 1,
+        lbx=(-np.inf,) * _d + (_R_MIN,), ubx=(np.inf,) * (_d + 1),
+        sd=_round_sd(_d), eq=_no_constraints, ineq=_no_constraints,
+        to_params=_round_params(_d),
+        params=(ParamSpec("center", _d, "point"), ParamSpec("radius", 1, "length")),
+        init=_round_init, min_rank=_d,
+    ))
+
+
+# --------------------------------------------------------------------------- plane
+# raw: n (3, unit), c: sd = n . x - c
+
+
+def _plane_sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+    return th[0] * X[0] + th[1] * X[1] + th[2] * X[2] - th[3]
+
+
+def _plane_params(th: FloatArray) -> dict[str, Any]:
+    n = th[:3] / np.linalg.norm(th[:3])
+    return {"point": th[3] * n, "normal": n}
+
+
+_register(Model(
+    kind="plane", dim=3, dof=3, n_raw=4,
+    lbx=(-np.inf,) * 4, ubx=(np.inf,) * 4,
+    sd=_plane_sd, eq=_unit_constraint(0, 3), ineq=_no_constraints,
+    to_params=_plane_params,
+    params=(ParamSpec("point", 3, "point"), ParamSpec("normal", 3, "direction")),
+    init=_hyperplane_init, min_rank=2, linear=True,
+))
+
+
+# --------------------------------------------------------------------------- cylinder
+# raw: p (3, axis point closest to the data centroid = origin), a (3, unit), r
+
+
+def _axial(X: Sequence[Any], th: Sequence[Any]) -> tuple[Any, Any]:
+    """Axial coordinate h and squared length |q|^2 of q = x - th[0:3] along axis th[3:6]."""
+    q = [X[j] - th[j] for j in range(3)]
+    h = q[0] * th[3] + q[1] * th[4] + q[2] * th[5]
+    qq = q[0] * q[0] + q[1] * q[1] + q[2] * q[2]
+    return h, qq
+
+
+def _cyl_sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+    h, qq = _axial(X, th)
+    return ops.sqrt(ops.fmax(qq - h * h, 1e-30)) - th[6]
+
+
+def _cyl_eq(th: Sequence[Any]) -> list[Any]:
+    return [th[3] * th[3] + th[4] * th[4] + th[5] * th[5] - 1.0,
+            th[0] * th[3] + th[1] * th[4] + th[2] * th[5]]
+
+
+def _cyl_params(th: FloatArray) -> dict[str, Any]:
+    return {"point": th[:3].copy(), "axis": th[3:6] / np.linalg.norm(th[3:6]),
+            "radius": float(th[6])}
+
+
+def _axis_candidates(ctx: InitContext) -> list[FloatArray]:
+    """Axis guesses: normal to all local normals (cylinder/cone), then the principal axes."""
+    surf = ctx.surface_points
+    cands = []
+    if len(surf) >= 5:
+        nrm = local_normals(surf, k=min(8, len(surf)))
+        _, _, vt = np.linalg.svd(nrm - nrm.mean(axis=0))
+        cands.append(vt[-1])
+        _, _, vt0 = np.linalg.svd(nrm)
+        cands.append(vt0[-1])
+    _, _, vt = pca(ctx.all_points)
+    cands.extend(vt)
+    return [_unit(c) for c in cands]
+
+
+def _cyl_from_axis(ctx: InitContext, axis: FloatArray) -> FloatArray:
+    u, v = _perp_basis(axis)
+    surf = ctx.surface_points
+    uv = np.stack([surf @ u, surf @ v], axis=1)
+    c2, r = kasa(uv)
+    p = c2[0] * u + c2[1] * v
+    p = p - (p @ axis) * axis
+    r_surf = max(r - ctx.side * float(np.mean(ctx.offsets)), 10 * _R_MIN)
+    return np.concatenate([p, axis, [r_surf]])
+
+
+def _cyl_init(ctx: InitContext) -> list[FloatArray]:
+    return [_cyl_from_axis(ctx, a) for a in _axis_candidates(ctx)]
+
+
+_register(Model(
+    kind="cylinder", dim=3, dof=5, n_raw=7,
+    lbx=(-np.inf,) * 6 + (_R_MIN,), ubx=(np.inf,) * 7,
+    sd=_cyl_sd, eq=_cyl_eq, ineq=_no_constraints,
+    to_params=_cyl_params,
+    params=(ParamSpec("point", 3, "point"), ParamSpec("axis", 3, "direction"),
+            ParamSpec("radius", 1, "length")),
+    init=_cyl_init, min_rank=2, starts=2,
+))
+
+
+# --------------------------------------------------------------------------- cone
+# raw: apex (3), a (3, unit, opening direction), alpha (half angle)
+
+
+def _cone_sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+    h, qq = _axial(X, th)
+    rho = ops.sqrt(ops.fmax(qq - h * h, 1e-30))
+    sa, cah = ops.sin(th[6]), ops.cos(th[6])
+    front = rho * sa + h * cah
+    return ops.where(front > 0, rho * cah - h * sa, ops.sqrt(ops.fmax(qq, 1e-30)))
+
+
+def _cone_params(th: FloatArray) -> dict[str, Any]:
+    return {"apex": th[:3].copy(), "axis": th[3:6] / np.linalg.norm(th[3:6]),
+            "half_angle": float(th[6])}
+
+
+def _cone_from_axis(ctx: InitContext, axis: FloatArray) -> list[FloatArray]:
+    """Meridian line fit: in (h, rho) coordinates about a trial axis through the circle centre
+    of the points' projection, the surface is a straight line rho = k (h - h0)."""
+    surf = ctx.surface_points
+    out = []
+    for ax in (axis, -axis):
+        u, v = _perp_basis(ax)
+        c2, _ = kasa(np.stack([surf @ u, surf @ v], axis=1))
+        base = c2[0] * u + c2[1] * v
+        h = (surf - base) @ ax
+        q = surf - base - h[:, None] * ax
+        rho = np.linalg.norm(q, axis=1)
+        A = np.stack([h, np.ones_like(h)], axis=1)
+        (k, k0), *_ = np.linalg.lstsq(A, rho, rcond=None)
+        if k <= 1e-3:
+            continue
+        alpha = float(np.clip(np.arctan(k), 2 * _A_MIN, np.pi / 2 - 2 * _A_MIN))
+        h0 = -k0 / k  # rho = 0 at the apex
+        apex = base + h0 * ax
+        # shift the apex along the axis to account for the contact radius
+        w = float(np.mean(ctx.offsets))
+        apex = apex + ctx.side * w / np.sin(alpha) * ax
+        out.append(np.concatenate([apex, ax, [alpha]]))
+    return out
+
+
+def _cone_init(ctx: InitContext) -> list[FloatArray]:
+    out: list[FloatArray] = []
+    for ax in _axis_candidates(ctx):
+        out.extend(_cone_from_axis(ctx, ax))
+    return out
+
+
+_register(Model(
+    kind="cone", dim=3, dof=6, n_raw=7,
+    lbx=(-np.inf,) * 6 + (_A_MIN,), ubx=(np.inf,) * 6 + (np.pi / 2 - _A_MIN,),
+    sd=_cone_sd, eq=_unit_constraint(3, 3), ineq=_no_constraints,
+    to_params=_cone_params,
+    params=(ParamSpec("apex", 3, "point"), ParamSpec("axis", 3, "direction"),
+            ParamSpec("half_angle", 1, "angle")),
+    init=_cone_init, min_rank=3, starts=3,
+))
+
+
+# --------------------------------------------------------------------------- torus
+# raw: centre (3), a (3, unit), R (major), r (minor); constraint R - r >= 0
+
+
+def _torus_sd(ops: Any, X: Sequence[Any], th: Sequence[Any]) -> Any:
+    h, qq = _axial(X, th)
+    rho = ops.sqrt(ops.fmax(qq - h * h, 1e-30))
+    return ops.sqrt(ops.fmax((rho - th[6]) * (rho - th[6]) + h * h, 1e-30)) - th[7]
+
+
+def _torus_ineq(th: Sequence[Any]) -> list[Any]:
+    return [th[6] - th[7]]
+
+
+def _torus_params(th: FloatArray) -> dict[str, Any]:
+    return {"center": th[:3].copy(), "axis": th[3:6] / np.linalg.norm(th[3:6]),
+            "major_radius": float(th[6]), "minor_radius": float(th[7])}
+
+
+def _torus_from_axis(ctx: InitContext, axis: FloatArray) -> FloatArray | None:
+    """Trial axis: centre from a circle fit of the projected points, then the meridian circle
+    (tube cross-section) by a Kasa fit in the (rho, h) half-plane."""
+    surf = ctx.surface_points
+    u, v = _perp_basis(axis)
+    c2, _ = kasa(np.stack([surf @ u, surf @ v], axis=1))
+    base = c2[0] * u + c2[1] * v
+    h = (surf - base) @ axis
+    rho = np.linalg.norm(surf - base - h[:, None] * axis, axis=1)
+    (R, h0), r = kasa(np.stack([rho, h], axis=1))
+    r = r - ctx.side * float(np.mean(ctx.offsets))
+    if not (R > r > _R_MIN):
+        return None
+    return np.concatenate([base + h0 * axis, axis, [R, r]])
+
+
+def _torus_init(ctx: InitContext) -> list[FloatArray]:
+    out = []
+    for ax in _axis_candidates(ctx):
+        th = _torus_from_axis(ctx, ax)
+        if th is not None:
+            out.append(th)
+    return out
+
+
+_register(Model(
+    kind="torus", dim=3, dof=7, n_raw=8,
+    lbx=(-np.inf,) * 6 + (_R_MIN, _R_MIN), ubx=(np.inf,) * 8,
+    sd=_torus_sd, eq=_unit_constraint(3, 3), ineq=_torus_ineq,
+    to_params=_torus_params,
+    params=(ParamSpec("center", 3, "point"), ParamSpec("axis", 3, "direction"),
+            ParamSpec("major_radius", 1, "length"), ParamSpec("minor_radius", 1, "length")),
+    init=_torus_init, min_rank=3, starts=3,
+))
+
+
+def signed_distance_np(m: Model, th: FloatArray, points: FloatArray) -> FloatArray:
+    """Numpy signed distance of ``points (N, d)`` under raw parameters ``th``."""
+    return np.asarray(m.sd(NP_OPS, [points[:, j] for j in range(m.dim)], [float(x) for x in th]),
+                      dtype=float).reshape(len(points))
