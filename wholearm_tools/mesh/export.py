@@ -9,19 +9,19 @@ existing target untouched.
 from __future__ import annotations
 
 import base64
-import contextlib
 import json
 import logging
 import os
 import struct
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wholearm_tools._io import atomic_path, write_bytes_atomic
 from wholearm_tools.errors import InputError, OutputError
 from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap
 from wholearm_tools.mesh.extent import full_extent
@@ -107,42 +107,6 @@ def map_mesh(surface_map: SurfaceMap, resolution: float = DEFAULT_RESOLUTION,
 # atomic file helpers
 
 
-@contextlib.contextmanager
-def atomic_path(target: str | os.PathLike[str], suffix: str) -> Iterator[Path]:
-    """Yield a temporary path ending in ``suffix`` next to ``target``; rename it onto ``target``
-    on success, remove it on failure (for writers that take a file name, not a stream)."""
-    target = Path(target)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise OutputError(f"{target}: output folder {folder} does not exist")
-    try:
-        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
-    except OSError as exc:
-        raise OutputError(f"{target}: cannot write output ({exc.strerror})") from None
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (usual permissions, unlike a bare mkstemp)."""
-    with atomic_path(path, ".tmp") as tmp:
-        tmp.write_bytes(data)
-
-
 # ---------------------------------------------------------------------------------------------
 # mesh writers
 
@@ -210,7 +174,7 @@ def _write_glb(mesh: TriangleMesh, path: Path, suffix: str) -> None:
         if not ok:
             raise OutputError(f"{path}: open3d could not write the glTF data")
         data = glb_from_gltf(json.loads(gltf_path.read_text(encoding="utf-8")))
-    write_bytes(path, data)
+    write_bytes_atomic(path, data)
 
 
 def _write_vtp(mesh: TriangleMesh, path: Path, suffix: str) -> None:

@@ -17,9 +17,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wholearm_tools import __version__
+from wholearm_tools._io import atomic_path
 from wholearm_tools.errors import InputError
 from wholearm_tools.mapfile import SurfaceMap
-from wholearm_tools.mesh.export import DEFAULT_HEIGHT, atomic_path, map_meshes
+from wholearm_tools.mesh.export import DEFAULT_HEIGHT, map_meshes
 from wholearm_tools.mesh.triangle_mesh import TriangleMesh
 
 TOPIC = "/wholearm/map"
