@@ -152,7 +152,9 @@ class _JointStateAccumulator(TopicDecoder):
         stamps = np.zeros(total, np.int64)
         log_times = np.zeros(total, np.int64)
         filled = np.zeros(total, dtype=bool)
-        for block_names, index, stamp, log_time, fields in self.blocks:
+        self.blocks.reverse()
+        while self.blocks:  # release each block once copied: peak = columns + one block
+            block_names, index, stamp, log_time, fields = self.blocks.pop()
             cols = [lookup[x] for x in block_names]
             k = index.shape[0]
             rows: slice | NDArray = index
@@ -172,7 +174,6 @@ class _JointStateAccumulator(TopicDecoder):
                     target[np.ix_(rows, np.asarray(cols))] = arr
         if not filled.all():  # pragma: no cover - every message lands in exactly one block
             raise self.error("internal error: messages lost while decoding")
-        self.blocks.clear()
         return JointStateColumns(tuple(names), stamps, log_times, *out, fast_messages=self.fast)
 
 

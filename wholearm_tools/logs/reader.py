@@ -121,6 +121,18 @@ def _order(times: NDArray[np.int64], source: str, topic: str) -> NDArray[np.intp
     return order[keep]
 
 
+def _take(values: NDArray[np.float64], rows: NDArray[np.intp], cols: list[int]
+          ) -> NDArray[np.float64]:
+    """``values[rows][:, cols]`` with one copy at most (none when both are the identity)."""
+    all_rows = rows.shape[0] == values.shape[0] and bool(np.all(rows == np.arange(rows.shape[0])))
+    all_cols = cols == list(range(values.shape[1]))
+    if all_rows and all_cols:
+        return values
+    if all_rows:
+        return values[:, cols]
+    return values[np.ix_(rows, cols)]
+
+
 def _columns_for(names: tuple[str, ...], available: tuple[str, ...], source: str, topic: str,
                  warn_extra: bool) -> list[int]:
     index = {name: i for i, name in enumerate(available)}
@@ -175,13 +187,13 @@ def _commands(scan: LogScan, topic: str, explicit: bool, names: tuple[str, ...],
     keep = _order(times, source, topic)
     t_cmd = times[keep]
     tau = q_cmd = None
-    effort = decoded.effort[keep][:, cols]
+    effort = _take(decoded.effort, keep, cols)
     if np.all(np.isfinite(effort)):
         tau = _hold(t_cmd, effort, t_state, np.zeros_like(q))
     elif np.any(np.isfinite(effort)):
         raise LogFormatError(f"{source}: command topic {topic!r} has efforts in some messages "
                              "or joints only")
-    position = decoded.position[keep][:, cols]
+    position = _take(decoded.position, keep, cols)
     if np.all(np.isfinite(position)):
         q_cmd = _hold(t_cmd, position, t_state, q)
     return tau, q_cmd
@@ -199,7 +211,7 @@ def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
     times = _times(cols_data.stamp_ns, cols_data.log_time_ns, source, topic)
     keep = _order(times, source, topic)
     stamps = times[keep]
-    q = cols_data.position[keep][:, cols]
+    q = _take(cols_data.position, keep, cols)
     bad = ~np.isfinite(q)
     if bad.any():
         row, col = np.argwhere(bad)[0]
@@ -207,7 +219,7 @@ def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
             f"{source}: topic {topic!r}: {int(bad.sum())} NaN or missing positions (first: "
             f"joint {names[col]!r} at t = {(stamps[row] - stamps[0]) * 1e-9:.6f} s)")
     t = (stamps - stamps[0]).astype(np.float64) * 1e-9
-    qd = cols_data.velocity[keep][:, cols]
+    qd = _take(cols_data.velocity, keep, cols)
     if not np.all(np.isfinite(qd)):
         log.info("%s: topic %r has no complete velocities; differentiating positions",
                  source, topic)

@@ -1,9 +1,10 @@
 """One sequential pass over an MCAP file: chunks decompressed one at a time, messages handed to
 the registered decoders as offsets into the chunk (see :mod:`wholearm_tools.logs.decoders`).
 
-The pass uses mcap's non-seeking :class:`mcap.stream_reader.StreamReader` with
-``emit_chunks=True``, so a file cut short (a recording that crashed) is read up to the cut: the
-scan records ``truncated=True`` and keeps every complete chunk before it.
+Records are read front to back with mcap's record classes (as its non-seeking
+``StreamReader`` does, minus the index records, which are skipped unparsed), so a file cut short
+(a recording that crashed) is read up to the cut: the scan records ``truncated=True`` and keeps
+every complete chunk before it.
 """
 
 from __future__ import annotations
@@ -132,9 +133,11 @@ class _Scanner:
                 decoder.add(buf, starts[sel], lengths[sel], times)
 
     def add_chunk_data(self, data: bytes) -> None:
+        """Hand every message record of a decompressed chunk to its decoder."""
         from mcap.data_stream import ReadDataStream
         from mcap.records import Channel, Schema
 
+        buf = np.frombuffer(data, dtype=np.uint8)
         positions: list[int] = []
         sizes: list[int] = []
         pos, end = 0, len(data)
@@ -144,6 +147,12 @@ class _Scanner:
                 op, length = unpack(data, pos)
                 body = pos + 9
                 if op == _OP_MESSAGE:
+                    if not positions:
+                        found = _periodic_messages(buf, pos)
+                        if found is not None:
+                            positions, sizes = found
+                            pos = end
+                            break
                     positions.append(body)
                     sizes.append(length)
                 elif op in (_OP_SCHEMA, _OP_CHANNEL):
@@ -157,14 +166,43 @@ class _Scanner:
             raise LogFormatError(f"{self.scan.source}: corrupt chunk ({exc})") from None
         if pos != end:
             raise LogFormatError(f"{self.scan.source}: corrupt chunk (record overruns the chunk)")
-        if not positions:
+        if len(positions) == 0:
             return
-        buf = np.frombuffer(data, dtype=np.uint8)
-        body = np.array(positions, dtype=np.int64)
-        lengths = np.array(sizes, dtype=np.int64) - _MESSAGE_HEADER
-        channel = buf[body].astype(np.int64) | (buf[body + 1].astype(np.int64) << 8)
-        log_time = buf[body[:, None] + (6 + np.arange(8))].view("<i8")[:, 0]
-        self.add_messages(buf, body + _MESSAGE_HEADER, lengths, channel, log_time)
+        body_arr = np.asarray(positions, dtype=np.int64)
+        lengths = np.asarray(sizes, dtype=np.int64) - _MESSAGE_HEADER
+        channel = buf[body_arr].astype(np.int64) | (buf[body_arr + 1].astype(np.int64) << 8)
+        log_time = buf[body_arr[:, None] + (6 + np.arange(8))].view("<i8")[:, 0]
+        self.add_messages(buf, body_arr + _MESSAGE_HEADER, lengths, channel, log_time)
+
+
+def _u64(buf: NDArray[np.uint8], at: NDArray[np.int64]) -> NDArray[np.int64]:
+    return buf[at[:, None] + np.arange(8)].view("<i8")[:, 0]
+
+
+def _periodic_messages(buf: NDArray[np.uint8], start: int, max_period: int = 4
+                       ) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
+    """Message records from ``start`` to the end of the chunk when they repeat a pattern of
+    1..max_period record lengths (one topic, or states and commands interleaved): every
+    record's opcode and length are checked in one numpy pass.  None when there is no pattern
+    (the caller then walks the records one by one)."""
+    end = buf.shape[0]
+    lengths: list[int] = []
+    pos = start
+    for _ in range(max_period):
+        if pos + 9 > end or buf[pos] != _OP_MESSAGE:
+            return None
+        lengths.append(int(_u64(buf, np.array([pos + 1]))[0]))
+        pos += 9 + lengths[-1]
+        stride = pos - start
+        if (end - start) % stride:
+            continue
+        offsets = np.cumsum([0] + [9 + n for n in lengths[:-1]])
+        count = (end - start) // stride
+        heads = (start + stride * np.arange(count, dtype=np.int64)[:, None] + offsets).ravel()
+        expected = np.tile(np.asarray(lengths, dtype=np.int64), count)
+        if np.all(buf[heads] == _OP_MESSAGE) and np.array_equal(_u64(buf, heads + 1), expected):
+            return heads + 9, expected
+    return None
 
 
 def _decompress(chunk: Any, source: str) -> bytes:
@@ -182,17 +220,25 @@ def _decompress(chunk: Any, source: str) -> bytes:
     raise LogFormatError(f"{source}: unsupported chunk compression {chunk.compression!r}")
 
 
+_SKIP = {0x07, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F}
+"""Opcodes skipped unread: chunk/message/attachment/metadata indexes, statistics, summary
+offsets, data end (parsing message indexes in Python would cost more than the decoding)."""
+
+
 def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
     """Read ``path`` once; decode the topics for which ``wanted(topic, schema_name)`` is true
     (default: every topic with a registered decoder).
 
-    Raises LogFormatError (naming the file) for a file that is not MCAP, empty, corrupt, or
-    truncated before any message.  A file cut short after some messages returns what was read
-    with ``truncated=True``.
+    Records are read sequentially (no seeking to the summary, so a file cut short is read up to
+    the cut); chunks are decompressed one at a time and their CRC checked.  Raises
+    LogFormatError (naming the file) for a file that is not MCAP, empty, corrupt, or truncated
+    before any message.  A file cut short after some messages returns what was read with
+    ``truncated=True``.
     """
-    from mcap.exceptions import EndOfFile, McapError
-    from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
+    import os
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 
     path = Path(path)
     check_magic(path)
@@ -212,45 +258,64 @@ def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
                              np.array([m.log_time for m in pending], np.int64))
         pending.clear()
 
+    def truncated(what: str) -> None:
+        scan.truncated = True
+        scan.truncation = what
+
+    readers = {0x01: Header, 0x03: Schema, 0x04: Channel, 0x05: Message, 0x06: Chunk,
+               0x09: Attachment, 0x0C: Metadata}
     with path.open("rb") as handle:
-        reader = StreamReader(handle, emit_chunks=True, record_size_limit=2**32)
-        try:
-            for record in reader.records:
-                if isinstance(record, Chunk):
+        size = os.fstat(handle.fileno()).st_size
+        handle.seek(len(MCAP_MAGIC))
+        while True:
+            head = handle.read(9)
+            if len(head) < 9:
+                truncated(f"end of file at byte {handle.tell()} before the footer")
+                break
+            op, length = _RECORD.unpack(head)
+            if op == 0x02:  # footer
+                break
+            if length > size - handle.tell():
+                truncated(f"record of {length} bytes at byte {handle.tell() - 9} runs past the "
+                          f"end of the file ({size} bytes)")
+                break
+            if op in _SKIP or op not in readers:
+                handle.seek(length, 1)
+                continue
+            body = handle.read(length)
+            try:
+                record = readers[op].read(ReadDataStream(BytesIO(body)), length) \
+                    if op == 0x05 else readers[op].read(ReadDataStream(BytesIO(body)))
+            except Exception as exc:
+                raise LogFormatError(f"{path}: corrupt MCAP record at byte "
+                                     f"{handle.tell() - length - 9} ({type(exc).__name__}: "
+                                     f"{exc})") from None
+            if isinstance(record, Chunk):
+                flush()
+                try:
+                    data = _decompress(record, str(path))
+                except LogFormatError:
+                    raise
+                except Exception as exc:
+                    raise LogFormatError(f"{path}: corrupt chunk ({exc})") from None
+                if record.uncompressed_crc and zlib.crc32(data) != record.uncompressed_crc:
+                    raise LogFormatError(f"{path}: corrupt chunk (CRC mismatch)")
+                scanner.add_chunk_data(data)
+            elif isinstance(record, Message):
+                pending.append(record)
+                if len(pending) >= _UNCHUNKED_BATCH:
                     flush()
-                    try:
-                        data = _decompress(record, str(path))
-                    except LogFormatError:
-                        raise
-                    except Exception as exc:
-                        raise LogFormatError(f"{path}: corrupt chunk ({exc})") from None
-                    if record.uncompressed_crc and zlib.crc32(data) != record.uncompressed_crc:
-                        raise LogFormatError(f"{path}: corrupt chunk (CRC mismatch)")
-                    scanner.add_chunk_data(data)
-                elif isinstance(record, Message):
-                    pending.append(record)
-                    if len(pending) >= _UNCHUNKED_BATCH:
-                        flush()
-                elif isinstance(record, Schema):
-                    scanner.add_schema(record)
-                elif isinstance(record, Channel):
-                    flush()
-                    scanner.add_channel(record)
-                elif isinstance(record, Header):
-                    scan.profile, scan.library = record.profile, record.library
-                elif isinstance(record, Metadata):
-                    scan.metadata.setdefault(record.name, dict(record.metadata))
-                elif isinstance(record, Attachment):
-                    scan.attachments.append(record.name)
-                elif isinstance(record, Footer):
-                    break
-        except (EndOfFile, struct.error) as exc:
-            scan.truncated = True
-            scan.truncation = str(exc) or type(exc).__name__
-        except LogFormatError:
-            raise
-        except (McapError, ValueError, OverflowError, MemoryError) as exc:
-            raise LogFormatError(f"{path}: corrupt MCAP ({type(exc).__name__}: {exc})") from None
+            elif isinstance(record, Schema):
+                scanner.add_schema(record)
+            elif isinstance(record, Channel):
+                flush()
+                scanner.add_channel(record)
+            elif isinstance(record, Header):
+                scan.profile, scan.library = record.profile, record.library
+            elif isinstance(record, Metadata):
+                scan.metadata.setdefault(record.name, dict(record.metadata))
+            elif isinstance(record, Attachment):
+                scan.attachments.append(record.name)
         flush()
     if scan.truncated and scan.n_messages == 0:
         raise LogFormatError(f"{path}: truncated MCAP file with no readable message")

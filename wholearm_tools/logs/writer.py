@@ -32,6 +32,7 @@ from wholearm_tools.logs.schemas import (
 
 PROFILES = ("ros2", "json")
 COMPRESSIONS = ("zstd", "lz4", "none")
+_BLOCK = 16384  # samples encoded per numpy pass
 
 
 def _json_default(value: Any) -> Any:
@@ -128,18 +129,19 @@ def write_run(
     has_commands = log.q_cmd is not None or log.tau_cmd is not None
     start_ns = int(stamps[0]) if log.n_samples else int(log.t0_ns)
 
+    def encode(block: slice, fields: list[np.ndarray | None]) -> Any:
+        """Payloads of samples ``block`` (encoded a block at a time to bound memory)."""
+        parts = [None if f is None else f[block] for f in fields]
+        if profile == "ros2":
+            return cdr.encode_joint_states(stamps[block], tuple(names), *parts)
+        return _joint_state_json(stamps[block], names, parts)
+
     if profile == "ros2":
         message_encoding, schema_encoding = MessageEncoding.CDR, SchemaEncoding.ROS2
-        state_rows = cdr.encode_joint_states(stamps, tuple(names), log.q, log.qd, None)
-        state_payloads: Any = state_rows
-        cmd_payloads: Any = (cdr.encode_joint_states(stamps, tuple(names), *cmd_fields)
-                             if has_commands else None)
         urdf = robot_to_urdf(run.robot).encode("utf-8") + b"\x00"
         description = cdr.CDR_LE + len(urdf).to_bytes(4, "little") + urdf
     else:
         message_encoding, schema_encoding = MessageEncoding.JSON, SchemaEncoding.JSONSchema
-        state_payloads = _joint_state_json(stamps, names, [log.q, log.qd, None])
-        cmd_payloads = _joint_state_json(stamps, names, cmd_fields) if has_commands else None
         description = _dumps({"data": robot_to_urdf(run.robot)})
 
     def schema_data(name: str) -> bytes:
@@ -177,9 +179,13 @@ def write_run(
             writer.add_message(truth_channel, start_ns, _dumps(ground_truth_to_json(run.truth)),
                                start_ns)
         add = writer.add_message
-        for i, stamp in enumerate(stamps.tolist()):
-            add(state_channel, stamp, bytes(state_payloads[i]), stamp, i)
-            if cmd_payloads is not None:
-                add(cmd_channel, stamp, bytes(cmd_payloads[i]), stamp, i)
+        for first in range(0, stamps.shape[0], _BLOCK):
+            block = slice(first, first + _BLOCK)
+            states = encode(block, [log.q, log.qd, None])
+            commands = encode(block, cmd_fields) if has_commands else None
+            for j, stamp in enumerate(stamps[block].tolist()):
+                add(state_channel, stamp, bytes(states[j]), stamp, first + j)
+                if commands is not None:
+                    add(cmd_channel, stamp, bytes(commands[j]), stamp, first + j)
         writer.add_metadata(METADATA_NAME, metadata)
         writer.finish()
