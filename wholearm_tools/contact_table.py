@@ -1,0 +1,184 @@
+"""The per-contact table: detection, classification and fit geometry of every contact.
+
+This is what ``contacts.csv`` holds and what ``wholearm fit contacts.csv`` reads back, so a user
+can fit already-classified contacts (or contacts edited by hand) without the log.
+
+Columns (planar runs have only x and y; ``z`` columns are omitted):
+
+``t`` [s], ``link`` (0-based), ``p_tip``, ``label`` (tip/link/ambiguous), ``variance`` [m²],
+``used_as`` (tip/link: the residual the fit uses; ambiguous contacts go to the likelier class),
+``tip_x, tip_y[, tip_z]`` (centre of the tip sphere, or of the joint sphere at the outer end of
+an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_radius`` [m],
+``primitive`` (id of the primitive that explains it, -1 none, empty before fitting),
+``residual`` [m] (distance to that primitive minus the radius).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools._io import write_text_atomic
+from wholearm_tools.errors import InputError
+
+FloatArray = NDArray[np.float64]
+LABELS = ("tip", "link", "ambiguous")
+
+
+def _ro(arr: object, dtype: object = float) -> NDArray:
+    out = np.array(arr, dtype=dtype)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ContactTable:
+    """``M`` contacts with everything the fit and the report need, columnar.
+
+    Parameters
+    ----------
+    t : (M,) float; link : (M,) int; p_tip : (M,) float; label : (M,) str
+    variance : (M,) float, σ² of the fit residual [m²]
+    used_as_tip : (M,) bool, the fit uses the tip residual (else the link residual)
+    tip_center : (M, d) float; tip_radius : (M,) float
+    seg_a, seg_b : (M, d) float, link axis; link_radius : (M,) float
+    primitive : (M,) int, -1 = unexplained (or not fitted yet)
+    residual : (M,) float, NaN where unexplained
+    """
+
+    t: FloatArray
+    link: NDArray[np.int64]
+    p_tip: FloatArray
+    label: NDArray[np.str_]
+    variance: FloatArray
+    used_as_tip: NDArray[np.bool_]
+    tip_center: FloatArray
+    tip_radius: FloatArray
+    seg_a: FloatArray
+    seg_b: FloatArray
+    link_radius: FloatArray
+    primitive: NDArray[np.int64]
+    residual: FloatArray
+
+    def __post_init__(self) -> None:
+        m = np.asarray(self.t).reshape(-1).shape[0]
+        d = np.asarray(self.tip_center).reshape(m, -1).shape[1] if m else \
+            np.asarray(self.tip_center).shape[-1]
+        if d not in (2, 3):
+            raise InputError(f"contact points must be 2-D or 3-D, got dimension {d}")
+        spec = {"t": (float, (m,)), "link": (np.int64, (m,)), "p_tip": (float, (m,)),
+                "label": (np.str_, (m,)), "variance": (float, (m,)),
+                "used_as_tip": (bool, (m,)), "tip_center": (float, (m, d)),
+                "tip_radius": (float, (m,)), "seg_a": (float, (m, d)), "seg_b": (float, (m, d)),
+                "link_radius": (float, (m,)), "primitive": (np.int64, (m,)),
+                "residual": (float, (m,))}
+        for name, (dtype, shape) in spec.items():
+            arr = _ro(getattr(self, name), dtype)
+            if arr.size == 0 and 0 in shape:
+                arr = _ro(np.zeros(shape), dtype)
+            if arr.shape != shape:
+                raise InputError(f"expected {name} of shape {shape}, got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        for name in ("t", "p_tip", "variance", "tip_center", "tip_radius", "seg_a", "seg_b",
+                     "link_radius"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise InputError(f"contact column {name} has NaN or infinite values")
+        bad = set(self.label.tolist()) - set(LABELS)
+        if bad:
+            raise InputError(f"unknown contact labels {sorted(bad)}; expected {LABELS}")
+        if np.any((self.p_tip < 0) | (self.p_tip > 1)):
+            raise InputError("p_tip must lie in [0, 1]")
+        if np.any(self.variance <= 0):
+            raise InputError("variance must be > 0")
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def dim(self) -> int:
+        return int(self.tip_center.shape[1])
+
+    def with_assignment(self, primitive: NDArray[np.int64], residual: FloatArray) -> ContactTable:
+        """A copy with the fit's per-contact primitive ids and residuals."""
+        return replace(self, primitive=primitive, residual=residual)
+
+    # ------------------------------------------------------------------ CSV
+    def to_csv(self) -> str:
+        axes = "xyz"[: self.dim]
+        header = ["t", "link", "p_tip", "label", "variance", "used_as",
+                  *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
+                  *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual"]
+        out = io.StringIO()
+        writer = csv.writer(out, lineterminator="\n")
+        writer.writerow(header)
+        for i in range(len(self)):
+            residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
+            writer.writerow([
+                f"{self.t[i]:.6f}", int(self.link[i]), f"{self.p_tip[i]:.6f}", self.label[i],
+                f"{self.variance[i]:.9g}", "tip" if self.used_as_tip[i] else "link",
+                *[f"{v:.9g}" for v in self.tip_center[i]], f"{self.tip_radius[i]:.9g}",
+                *[f"{v:.9g}" for v in self.seg_a[i]], *[f"{v:.9g}" for v in self.seg_b[i]],
+                f"{self.link_radius[i]:.9g}", int(self.primitive[i]), residual,
+            ])
+        return out.getvalue()
+
+    @classmethod
+    def from_csv(cls, text: str, source: str = "contacts.csv") -> ContactTable:
+        rows = list(csv.DictReader(io.StringIO(text)))
+        if not rows:
+            raise InputError(f"{source}: no contacts (empty table or header only)")
+        cols = rows[0].keys()
+        dim = 3 if "tip_z" in cols else 2
+        axes = "xyz"[:dim]
+        required = ["t", "link", "p_tip", "label", "variance", "used_as", "tip_radius",
+                    "link_radius", *[f"{p}_{c}" for p in ("tip", "a", "b") for c in axes]]
+        missing = [c for c in required if c not in cols]
+        if missing:
+            raise InputError(f"{source}: missing columns {missing}")
+
+        def column(name: str, dtype: type = float) -> NDArray:
+            try:
+                return np.array([dtype(r[name]) for r in rows])
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"{source}: bad value in column {name!r} ({exc})") from None
+
+        def points(prefix: str) -> FloatArray:
+            return np.stack([column(f"{prefix}_{c}") for c in axes], axis=1)
+
+        used = column("used_as", str)
+        if not set(used.tolist()) <= {"tip", "link"}:
+            raise InputError(f"{source}: column 'used_as' must be tip or link")
+        m = len(rows)
+        try:
+            return cls(
+                t=column("t"), link=column("link", int), p_tip=column("p_tip"),
+                label=column("label", str), variance=column("variance"),
+                used_as_tip=used == "tip", tip_center=points("tip"),
+                tip_radius=column("tip_radius"), seg_a=points("a"), seg_b=points("b"),
+                link_radius=column("link_radius"),
+                primitive=np.array([int(r.get("primitive") or -1) for r in rows]),
+                residual=np.array([float(r["residual"]) if r.get("residual") else np.nan
+                                   for r in rows]) if "residual" in cols else np.full(m, np.nan),
+            )
+        except InputError as exc:
+            raise InputError(f"{source}: {exc}") from None
+
+
+def write_contact_table(path: str | Path, table: ContactTable) -> None:
+    """Write ``table`` as CSV, atomically."""
+    write_text_atomic(path, table.to_csv())
+
+
+def read_contact_table(path: str | Path) -> ContactTable:
+    """Read a contacts.csv written by :func:`write_contact_table` (or by hand, same columns)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read contacts ({exc.strerror})") from None
+    return ContactTable.from_csv(text, source=str(path))

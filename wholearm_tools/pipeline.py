@@ -1,0 +1,242 @@
+"""From a logged run to a map: detect → classify (B) → fit-and-grow → SurfaceMap.
+
+``reconstruct(run, B=...)`` is the public entry point the CLI and notebooks share.  It is pure:
+it reads nothing and writes nothing (see ``write_reconstruction`` for the outputs).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.contact_table import ContactTable, write_contact_table
+from wholearm_tools.errors import InputError
+from wholearm_tools.logs.records import Run
+from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap, write_map
+from wholearm_tools.robot.model import RobotModel
+
+#: primitive types tried by fit-and-grow, by workspace dimension
+KINDS_BY_DIM = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
+
+
+@dataclass(frozen=True, slots=True)
+class ReconstructParams:
+    """Options of :func:`reconstruct`.
+
+    B : smallest expected surface curvature radius [m] (dilation of the robot in eq. 2)
+    causal : classify with the map as the robot saw it live instead of the whole run's map
+    kinds : primitive types to consider (default: all of the run's dimension)
+    loss : robust loss of the fits ("linear", "huber", "cauchy")
+    noise : residual noise level [m]; None estimates it
+    free_hints : number of robot poses sampled as free-space hints for the fits
+    """
+
+    B: float = 0.02
+    causal: bool = False
+    kinds: tuple[str, ...] | None = None
+    loss: str = "huber"
+    noise: float | None = None
+    free_hints: int = 400
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.B) and self.B > 0):
+            raise InputError(f"B must be a positive length in metres, got {self.B}")
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """Everything one reconstruction produced, for the exporters and the report."""
+
+    run: Run
+    params: ReconstructParams
+    contacts: Any            # wholearm_tools.contacts.Contacts
+    classification: Any      # wholearm_tools.classify.Classification
+    table: ContactTable
+    fits: tuple[Any, ...]    # wholearm_tools.fit.FitResult per primitive, in map order
+    surface_map: SurfaceMap
+    timings: dict[str, float] = field(default_factory=dict)
+    messages: tuple[str, ...] = ()
+
+    @property
+    def planar(self) -> bool:
+        return self.run.robot.planar
+
+
+def contact_table(robot: RobotModel, contacts: Any, classification: Any) -> ContactTable:
+    """Per-contact fit geometry from detected and classified contacts.
+
+    A contact on link ``n`` is either on the sphere at the outer end of the link (the tip for the
+    last link, a joint for inner links; centre = that joint's position at the contact
+    configuration, radius ``robot.contact_radius(n, tip=True)``) or on the link's side (segment
+    joint n → joint n + 1, radius ``link_radii[n]``).  Ambiguous contacts are used as the likelier
+    class; their large variance keeps their weight low.
+    """
+    m = len(contacts)
+    dim = robot.dim
+    pts = robot.joint_positions(contacts.q) if m else np.zeros((0, robot.dof + 1, 3))
+    rows = np.arange(m)
+    link = np.asarray(contacts.link, dtype=np.int64)
+    seg_a = pts[rows, link, :dim]
+    seg_b = pts[rows, link + 1, :dim]
+    tip_radius = np.array([robot.contact_radius(int(k), tip=True) for k in link])
+    link_radius = robot.link_radii[link] if m else np.zeros(0)
+    p_tip = np.asarray(classification.p_tip, dtype=float)
+    label = np.asarray(classification.label)
+    used_as_tip = np.where(label == "ambiguous", p_tip >= 0.5, label == "tip")
+    return ContactTable(
+        t=contacts.t, link=link, p_tip=p_tip, label=label, variance=classification.variance,
+        used_as_tip=used_as_tip, tip_center=seg_b, tip_radius=tip_radius, seg_a=seg_a,
+        seg_b=seg_b, link_radius=link_radius, primitive=np.full(m, -1),
+        residual=np.full(m, np.nan),
+    )
+
+
+def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> NDArray:
+    """Points the robot occupied during the run (free space), subsampled evenly: ``(K, d)``."""
+    if len(q) == 0 or count <= 0:
+        return np.zeros((0, robot.dim))
+    idx = np.unique(np.linspace(0, len(q) - 1, min(count, len(q))).round().astype(int))
+    a, b = robot.link_segments(q[idx])
+    mid = 0.5 * (a + b)
+    return np.concatenate([a, mid, b], axis=1).reshape(-1, 3)[:, : robot.dim]
+
+
+def fit_data_from_table(table: ContactTable, free_points: NDArray | None = None) -> Any:
+    """The fitter's input (tips first, then links) and the table row of each fit contact."""
+    from wholearm_tools.fit import FitData
+
+    tips = np.flatnonzero(table.used_as_tip)
+    links = np.flatnonzero(~table.used_as_tip)
+    weight = 1.0 / table.variance
+    weight = weight / weight.max() if len(weight) else weight
+    data = FitData.create(
+        tip_points=table.tip_center[tips], tip_radius=table.tip_radius[tips],
+        tip_weight=weight[tips], link_a=table.seg_a[links], link_b=table.seg_b[links],
+        link_radius=table.link_radius[links], link_weight=weight[links],
+        free_points=free_points, dim=table.dim,
+    )
+    return data, np.concatenate([tips, links])
+
+
+def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None = None,
+              loss: str = "huber", noise: float | None = None,
+              free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
+              ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
+    """Fit-and-grow over a contact table → (map, fits, table with assignments, messages)."""
+    from wholearm_tools.fit import segment
+    from wholearm_tools.mesh import support_extent
+
+    dim = 2 if planar else 3
+    if table.dim != dim:
+        raise InputError(f"contacts are {table.dim}-D but the map is {dim}-D")
+    kinds = kinds or KINDS_BY_DIM[dim]
+    data, order = fit_data_from_table(table, free_points)
+    seg = segment(data, kinds=kinds, loss=loss, noise=noise)
+    assignment = np.full(len(table), -1, dtype=np.int64)
+    residual = np.full(len(table), np.nan)
+    primitives: list[MappedPrimitive] = []
+    fits: list[Any] = []
+    messages = list(seg.messages)
+    n_tip = int(table.used_as_tip.sum())
+    for pid, fit in enumerate(seg.fits):
+        members = np.flatnonzero(seg.assignment == pid)   # indices into the fit data
+        rows = order[members]
+        assignment[rows] = pid
+        residual[rows] = fit.member_residuals if hasattr(fit, "member_residuals") else np.nan
+        support_pts = _support_points(fit, data, members, n_tip)
+        extent = support_extent(fit.kind, fit.params, support_pts)
+        ci95 = {k: (np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)) / 2
+                for k, (lo, hi) in fit.ci95.items()}
+        primitives.append(MappedPrimitive(
+            id=pid, kind=fit.kind, params=dict(fit.params), ci95=ci95,
+            covariance=np.asarray(fit.covariance if fit.covariance is not None else
+                                  np.zeros((0, 0))),
+            support={"tip": int(np.sum(members < n_tip)), "link": int(np.sum(members >= n_tip))},
+            rms_residual=float(fit.rms_residual), extent=extent,
+        ))
+        fits.append(fit)
+    unexplained_rows = np.flatnonzero(assignment < 0)
+    unexplained = table.tip_center[unexplained_rows[table.used_as_tip[unexplained_rows]]]
+    counts = {"count": len(table), "tip": int(np.sum(table.label == "tip")),
+              "link": int(np.sum(table.label == "link")),
+              "ambiguous": int(np.sum(table.label == "ambiguous")),
+              "unexplained": int(len(unexplained_rows))}
+    surface_map = SurfaceMap(planar=planar, B=float(B), primitives=tuple(primitives),
+                             contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
+    table = table.with_assignment(assignment, residual)
+    return surface_map, tuple(fits), table, tuple(messages)
+
+
+def _support_points(fit: Any, data: Any, members: NDArray, n_tip: int) -> NDArray:
+    """Surface points behind a primitive: tip centres and link points at their latent t,
+    each projected onto the fitted surface."""
+    prim = fit.primitive
+    tips = members[members < n_tip]
+    links = members[members >= n_tip] - n_tip
+    pts = [data.tip_points[tips]]
+    if len(links):
+        a, b = data.link_a[links], data.link_b[links]
+        _, t = prim.segment_signed_distance(a, b, free_side=fit.free_side)
+        pts.append(a + t[:, None] * (b - a))
+    points = np.concatenate(pts, axis=0)
+    return prim.closest_point(points) if len(points) else points
+
+
+def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
+    """Detect, classify and fit a logged run.
+
+    Parameters
+    ----------
+    run : Run (from ``wholearm_tools.logs.read_run`` or the simulator)
+    B : float, smallest expected surface curvature radius [m]
+    **options : fields of :class:`ReconstructParams`
+
+    Returns
+    -------
+    Reconstruction; a run where nothing could be fitted still returns one (with no primitives
+    and messages saying why): the CLI decides whether that is an error.
+    """
+    from wholearm_tools.classify import tip_probability
+    from wholearm_tools.contacts import detect_contacts
+
+    params = ReconstructParams(B=B, **options)
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+    contacts = detect_contacts(run.log, run.robot)
+    timings["detect"] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    classification = tip_probability(run, contacts, params.B, causal=params.causal)
+    timings["classify"] = time.perf_counter() - clock
+    table = contact_table(run.robot, contacts, classification)
+    clock = time.perf_counter()
+    hints = free_space_hints(run.robot, np.asarray(run.log.q), params.free_hints)
+    meta = {"source": run.source, "causal": params.causal, "duration": run.log.duration}
+    if len(table) == 0:
+        surface_map = SurfaceMap(planar=run.robot.planar, B=params.B, primitives=(),
+                                 contacts={"count": 0}, meta=meta,
+                                 unexplained=np.zeros((0, run.robot.dim)))
+        fits: tuple[Any, ...] = ()
+        messages: tuple[str, ...] = ("no contacts detected in the run",)
+    else:
+        surface_map, fits, table, messages = fit_table(
+            table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
+            noise=params.noise, free_points=hints, meta=meta)
+    timings["fit"] = time.perf_counter() - clock
+    return Reconstruction(run=run, params=params, contacts=contacts,
+                          classification=classification, table=table, fits=fits,
+                          surface_map=surface_map, timings=timings, messages=messages)
+
+
+def write_reconstruction(out_dir: str | Path, rec: Reconstruction) -> dict[str, Path]:
+    """Write ``map.json`` and ``contacts.csv`` into ``out_dir`` (created if needed)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"map": out / "map.json", "contacts": out / "contacts.csv"}
+    write_map(paths["map"], rec.surface_map)
+    write_contact_table(paths["contacts"], rec.table)
+    return paths
