@@ -15,6 +15,9 @@ COMMANDS = (
     "cli.scenarios",
     "cli.simulate",
     "cli.inspect",
+    "cli.contacts",
+    "cli.plot_ptip",
+    "cli.export",
 )
 
 
