@@ -25,3 +25,36 @@ def progress_enabled() -> bool:
     import sys
 
     return sys.stderr.isatty()
+
+
+def B_option(default: float | None = 0.02):  # noqa: N802 - B is the paper's name
+    """``--B``: smallest expected surface curvature radius [m]."""
+    return click.option(
+        "--B", "B", type=click.FloatRange(min=0.0, min_open=True), default=default,
+        required=default is None, show_default=default is not None,
+        help="Smallest expected surface curvature radius B [m].")
+
+
+robot_option = click.option(
+    "--robot", "robot_file", type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None, help="URDF file (default: the log's /robot_description).")
+joint_topic_option = click.option(
+    "--joint-topic", default=None, help="JointState topic (default: /joint_states).")
+command_topic_option = click.option(
+    "--command-topic", default=None,
+    help="Commanded torques topic (JointState effort or Float64MultiArray).")
+
+
+def prepare_output_dir(path: Path, names: list[str], overwrite: bool) -> None:
+    """Create ``path``; refuse when any of ``names`` already exists in it unless overwriting."""
+    existing = [n for n in names if (path / n).exists()]
+    if existing and not overwrite:
+        raise click.ClickException(
+            f"{path}: already holds {', '.join(existing)} (use --overwrite to replace)")
+    if path.exists() and not path.is_dir():
+        raise click.ClickException(f"{path}: exists and is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise click.ClickException(f"{path}: cannot create output folder ({exc.strerror})"
+                                   ) from None

@@ -1,0 +1,46 @@
+"""``wholearm fit contacts.csv -o map.json``: fit already-classified contacts."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from cli.options import B_option, check_output_file, json_option, overwrite_option
+
+
+@click.command("fit")
+@click.argument("contacts", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="map.json to write.")
+@B_option()
+@click.option("--kind", "kinds", multiple=True,
+              help="Primitive types to consider (repeatable; default: all for the dimension).")
+@click.option("--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
+              show_default=True)
+@json_option
+@overwrite_option
+def command(contacts: Path, output: Path, B: float, kinds: tuple[str, ...], loss: str,
+            as_json: bool, overwrite: bool) -> None:
+    """Fit-and-grow primitives to the contacts of CONTACTS (a contacts.csv)."""
+    from wholearm_tools.contact_table import read_contact_table
+    from wholearm_tools.mapfile import write_map
+    from wholearm_tools.pipeline import fit_table
+
+    check_output_file(output, overwrite)
+    table = read_contact_table(contacts)
+    surface_map, _, _, messages = fit_table(
+        table, planar=table.dim == 2, B=B, kinds=kinds or None, loss=loss,
+        meta={"source": str(contacts)})
+    if not surface_map.primitives:
+        reason = "; ".join(messages) or "no primitive explains the contacts"
+        raise click.ClickException(f"{contacts}: nothing could be fitted ({reason})")
+    write_map(output, surface_map)
+    if as_json:
+        click.echo(json.dumps(surface_map.to_json()))
+        return
+    for p in surface_map.primitives:
+        click.echo(f"#{p.id} {p.kind}: support tip {p.support['tip']} link {p.support['link']}, "
+                   f"rms {p.rms_residual * 1e3:.2f} mm")
+    click.echo(f"wrote {output}")
