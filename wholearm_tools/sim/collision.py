@@ -84,7 +84,8 @@ class Collider:
     """
 
     def __init__(self, robot: RobotModel, obstacles: Sequence[ObstacleLike],
-                 tolerance: float = 1e-6, sample_step: float = 0.01) -> None:
+                 tolerance: float = 1e-6, sample_step: float = 0.005,
+                 node_step: float = 0.01) -> None:
         if not obstacles:
             raise InputError("the environment has no obstacles")
         if tolerance <= 0:
@@ -103,6 +104,7 @@ class Collider:
         self.obstacles = tuple(obstacles)
         self.dim = robot.dim
         self.tolerance = float(tolerance)
+        self.node_step = float(node_step)
         n = robot.dof
         pts0 = robot.joint_positions(np.zeros(n))
         lengths = np.linalg.norm(np.diff(pts0, axis=0), axis=1)
@@ -242,22 +244,31 @@ class Collider:
         h = 0.5 * self.tolerance
         if Q is None:
             Q = path(times)
+        # coarse nodes: every robot point moves at most node_step between consecutive ones
+        step = self.motion_bound(np.diff(Q, axis=0), links).max(axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(step)])
+        keep = np.flatnonzero(np.diff(np.floor(cum / self.node_step), prepend=-1.0) > 0)
+        keep = np.unique(np.concatenate([keep, [len(times) - 1]]))
+        times, Q = times[keep], Q[keep]
         lb = self.clearance(Q, links, bound=True).value + h  # lower bound of g; contact: g < 0
         m = self.motion_bound(np.diff(Q, axis=0), links)
         unsafe = np.flatnonzero(np.any(lb[:-1] + lb[1:] <= m, axis=1))
-        if unsafe.size == 0:
-            return None
-        # exact clearances at the ends of every suspect interval, in one batch
-        ends = np.unique(np.concatenate([unsafe, unsafe + 1]))
-        g = np.full_like(lb, np.nan)
-        g[ends] = self.clearance(Q[ends], links).value + h
-        if np.any(g[0] < 0):
-            raise InputError(f"guarded move starts in collision (clearance {g[0].min() - h:.3g})")
+        exact: dict[int, FloatArray] = {}
+
+        def g_at(k: int) -> FloatArray:
+            if k not in exact:
+                exact[k] = self.clearance(Q[k][None], links).value[0] + h
+            return exact[k]
+
+        if unsafe.size and unsafe[0] == 0 and np.any(g_at(0) < 0):
+            raise InputError(f"guarded move starts in collision (clearance "
+                             f"{g_at(0).min() - h:.3g})")
         for k in unsafe:
-            if np.all(g[k] + g[k + 1] > m[k]):
+            g0, g1 = g_at(int(k)), g_at(int(k) + 1)
+            if np.all(g0 + g1 > m[k]):
                 continue
             hit = self._refine(path, float(times[k]), float(times[k + 1]), Q[k], Q[k + 1],
-                               g[k], g[k + 1], links, h)
+                               g0, g1, links, h)
             if hit is not None:
                 return hit
         return None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,6 +31,7 @@ class SweptGrid:
         self.origin = base - reach
         self.shape = tuple([int(np.ceil(2 * reach / self.cell)) + 1] * self.dim)
         self.swept = np.zeros(self.shape, dtype=bool)
+        self.attempted = np.zeros(self.shape, dtype=bool)
         # sample points along each link axis, spaced at most half a cell apart
         pts0 = robot.joint_positions(np.zeros(robot.dof))
         lengths = np.linalg.norm(np.diff(pts0, axis=0), axis=1)
@@ -55,10 +58,15 @@ class SweptGrid:
         """Mark the cells swept by the robot axes at configurations ``Q (M, n)``."""
         self.swept.flat[self.cells(self.robot_points(Q))] = True
 
+    def attempt(self, Q: FloatArray) -> None:
+        """Mark cells a blocked move was commanded through (tried already, not swept)."""
+        self.attempted.flat[self.cells(self.robot_points(Q))] = True
+
     def novelty(self, Q: FloatArray) -> int:
-        """Number of distinct unswept cells the robot axes visit at configurations ``Q``."""
+        """Number of distinct cells, neither swept nor already attempted, that the robot axes
+        visit at configurations ``Q``."""
         idx = np.unique(self.cells(self.robot_points(Q)))
-        return int(np.count_nonzero(~self.swept.flat[idx]))
+        return int(np.count_nonzero(~(self.swept.flat[idx] | self.attempted.flat[idx])))
 
     @property
     def fraction_swept(self) -> float:
@@ -70,7 +78,7 @@ def densify(vertices: FloatArray, robot_step: float, lever: float) -> FloatArray
     ``robot_step`` between consecutive ones (``lever`` bounds the distance of any point from any
     joint), shape ``(K, n)``."""
     out = [vertices[:1]]
-    for a, b in zip(vertices[:-1], vertices[1:], strict=True):
+    for a, b in itertools.pairwise(vertices):
         k = max(1, int(np.ceil(np.abs(b - a).sum() * lever / robot_step)))
         f = np.linspace(0.0, 1.0, k + 1)[1:, None]
         out.append(a + f * (b - a))

@@ -316,15 +316,17 @@ def simulate(
         rec.fill(k_hold, move_samples)
         if not has_contact:
             q_end = result.vertices[-1]
-            strat.observe(densify(result.vertices, sweep_step, max_lever))
-            grid.mark(densify(result.vertices, sweep_step, max_lever))
+            swept = densify(result.vertices, sweep_step, max_lever)
+            grid.mark(swept)
+            strat.observe(swept, None)
             moves.append(Move(t0, t_stop, t_stop, rec.time(k_hold), q_start, target, ()))
             q = q_end
         else:
             # retreat back along the swept polyline to a configuration with clearance
             swept = densify(result.vertices, sweep_step, max_lever)
             grid.mark(swept)
-            strat.observe(swept)
+            strat.observe(swept, densify(np.stack([result.vertices[-1], target]), sweep_step,
+                                         max_lever))
             back = _retreat_vertices(collider, result.vertices, controller)
             path = PolylinePath.build(back, vmax, controller.t_acc)
             t_r0 = rec.time(k_hold)

@@ -5,7 +5,11 @@ Each strategy is registered by name in :data:`STRATEGIES` and built with
 
 ``lower``, ``upper`` : (n,) target box in joint space (default: the joint limits);
 ``margin`` : float, targets whose clearance is below it are rejected (default 5 mm);
-``min_step`` : float, smallest joint-space distance [rad] from the current configuration.
+``min_step`` : float, smallest joint-space distance [rad] from the current configuration;
+``max_step`` : float or None, largest change of any joint in one move [rad];
+``free_target`` : bool, True (default): the target configuration itself must be free; False:
+targets behind obstacles are allowed (the guarded move stops at the wall), only moves that would
+be in collision right at their start are rejected.
 
 A strategy only proposes *targets*; guarded moves stop at the first contact, so a target behind a
 wall is a perfectly good way to find the wall.  Targets that start in collision are rejected.
@@ -15,7 +19,7 @@ from __future__ import annotations
 
 import itertools
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -58,7 +62,8 @@ class Strategy(ABC):
     def __init__(self, robot: RobotModel, collider: Collider, grid: SweptGrid, *,
                  rng: np.random.Generator | int | None = None,
                  lower: Sequence[float] | None = None, upper: Sequence[float] | None = None,
-                 margin: float = 0.005, min_step: float = 0.15) -> None:
+                 margin: float = 0.005, min_step: float = 0.15, max_step: float | None = None,
+                 free_target: bool = True) -> None:
         self.robot = robot
         self.collider = collider
         self.grid = grid
@@ -75,24 +80,41 @@ class Strategy(ABC):
                              "limits")
         self.margin = float(margin)
         self.min_step = float(min_step)
+        self.max_step = None if max_step is None else float(max_step)
+        self.free_target = bool(free_target)
 
     def acceptable(self, q: FloatArray, candidates: FloatArray) -> NDArray[np.bool_]:
         """Candidates far enough from ``q`` whose configuration is free (with margin)."""
-        far = np.linalg.norm(candidates - q, axis=1) >= self.min_step
+        dist = np.linalg.norm(candidates - q, axis=1)
+        far = dist >= self.min_step
         ok = np.zeros(len(candidates), dtype=bool)
-        if np.any(far):
+        if not np.any(far):
+            return ok
+        if self.free_target:
             ok[far] = self.collider.is_free(candidates[far], self.margin)
+        else:
+            # the first few millimetres of the move must be free: no zero-length guarded moves
+            step = np.abs(candidates[far] - q) @ self.collider.lever[:, -1]
+            frac = np.minimum(1.0, 0.003 / np.maximum(step, 1e-12))[:, None]
+            ok[far] = self.collider.is_free(q + frac * (candidates[far] - q), 0.0)
         return ok
 
-    def uniform(self, count: int) -> FloatArray:
-        return self.rng.uniform(self.lower, self.upper, size=(count, self.robot.dof))
+    def uniform(self, count: int, q: FloatArray | None = None) -> FloatArray:
+        """Uniform targets in the box (intersected with ``q ± max_step`` when set)."""
+        lo, hi = self.lower, self.upper
+        if q is not None and self.max_step is not None:
+            lo = np.maximum(lo, q - self.max_step)
+            hi = np.minimum(hi, q + self.max_step)
+        return self.rng.uniform(lo, hi, size=(count, self.robot.dof))
 
     @abstractmethod
     def next_target(self, q: FloatArray) -> FloatArray | None:
         """Next joint target from configuration ``q (n,)``, or None when nothing is reachable."""
 
-    def observe(self, path: FloatArray) -> None:  # noqa: B027 - optional hook
-        """Called with the configurations the robot actually swept (``(K, n)``)."""
+    def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:  # noqa: B027
+        """Called after each move with the configurations the robot swept ``(K, n)`` and, when
+        the move stopped at a contact, the configurations it was commanded toward but could not
+        reach ``(J, n)``."""
 
 
 @register
@@ -108,7 +130,7 @@ class RandomStrategy(Strategy):
 
     def next_target(self, q: FloatArray) -> FloatArray | None:
         for _ in range(self.tries):
-            cand = self.uniform(self.batch)
+            cand = self.uniform(self.batch, q)
             ok = np.flatnonzero(self.acceptable(q, cand))
             if ok.size:
                 return cand[ok[0]]
@@ -167,6 +189,10 @@ class NoveltyStrategy(Strategy):
 
     name = "novelty"
 
+    def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:
+        if attempted is not None and len(attempted):
+            self.grid.attempt(attempted)
+
     def __init__(self, *args: Any, candidates: int = 24, path_samples: int = 6,
                  **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -174,7 +200,7 @@ class NoveltyStrategy(Strategy):
         self.path_samples = int(path_samples)
 
     def next_target(self, q: FloatArray) -> FloatArray | None:
-        cand = self.uniform(self.candidates * 2)
+        cand = self.uniform(self.candidates * 2, q)
         ok = np.flatnonzero(self.acceptable(q, cand))[: self.candidates]
         if ok.size == 0:
             return None
@@ -183,5 +209,3 @@ class NoveltyStrategy(Strategy):
         scores += self.rng.uniform(0.0, 0.5, size=scores.shape)  # seeded tie break
         return cand[ok[int(np.argmax(scores))]]
 
-
-StrategyFactory = Callable[..., Strategy]
