@@ -180,7 +180,7 @@ class Collider:
         for j, i in enumerate(links):
             fr = self._fractions[i]
             a, b = pts[:, i], pts[:, i + 1]
-            chunks.append((a[:, None, :] + fr[None, :, None] * (b - a)[:, None, :]))
+            chunks.append(a[:, None, :] + fr[None, :, None] * (b - a)[:, None, :])
             owners.append(np.full(len(fr), j))
             params.append(fr)
             slack.append(np.full(len(fr), self._slack[i] + self.radii[i]))

@@ -91,7 +91,7 @@ class Scenario:
         name = self.strategy if strategy is None else strategy
         params = self.strategy_params if name == self.strategy else _box_only(
             self.strategy_params)
-        meta = {"scenario": self.name, **{k: v for k, v in self.hints.items()}}
+        meta = {"scenario": self.name, **dict(self.hints.items())}
         return simulate(
             self.robot, self.obstacles, strategy=name, strategy_params=params,
             duration=self.duration if duration is None else duration,
