@@ -175,3 +175,57 @@ def param_error(kind: str, fit: dict[str, Any], true: dict[str, Any]) -> float:
                    abs(fit["major_radius"] - true["major_radius"]),
                    abs(fit["minor_radius"] - true["minor_radius"]))
     raise ValueError(kind)
+
+
+def merge(*parts: FitData) -> FitData:
+    """Concatenate contact sets (tips first, then links, as FitData orders them)."""
+    cat = np.concatenate
+    return FitData.create(
+        cat([p.tip_points for p in parts]), cat([p.tip_radius for p in parts]),
+        cat([p.tip_weight for p in parts]), cat([p.link_a for p in parts]),
+        cat([p.link_b for p in parts]), cat([p.link_radius for p in parts]),
+        cat([p.link_weight for p in parts]), cat([p.free_points for p in parts]),
+        dim=parts[0].dim)
+
+
+def planar_scene(rng: np.random.Generator, noise: float = 0.0
+                 ) -> tuple[FitData, list[tuple[str, dict[str, Any]]], np.ndarray]:
+    """Two lines (floor and wall) and a circle (a post), mixed tip and link contacts.
+    Returns the data, the true primitives and each contact's true primitive index."""
+    prims = [
+        ("line", {"point": np.array([0.0, -0.5]), "direction": np.array([1.0, 0.0])}),
+        ("line", {"point": np.array([1.0, 0.0]), "direction": np.array([0.0, 1.0])}),
+        ("circle", {"center": np.array([-0.2, 0.3]), "radius": 0.25}),
+    ]
+    counts = [(14, 8), (12, 8), (14, 8)]
+    return _scene(prims, counts, rng, noise)
+
+
+def spatial_scene(rng: np.random.Generator, noise: float = 0.0
+                  ) -> tuple[FitData, list[tuple[str, dict[str, Any]]], np.ndarray]:
+    """A floor plane and a vertical cylindrical post standing on it."""
+    prims = [
+        ("plane", {"point": np.array([0.0, 0.0, -0.5]), "normal": np.array([0.0, 0.0, 1.0])}),
+        ("cylinder", {"point": np.array([0.2, 0.1, 0.0]), "axis": np.array([0.0, 0.0, 1.0]),
+                      "radius": 0.2}),
+    ]
+    counts = [(30, 15), (30, 15)]
+    return _scene(prims, counts, rng, noise)
+
+
+def _scene(prims, counts, rng, noise):
+    parts, labels_t, labels_l = [], [], []
+    for i, ((kind, p), (nt, nl)) in enumerate(zip(prims, counts, strict=True)):
+        d = contacts(kind, p, nt, nl, 1, rng, noise=noise, link_length=0.2)
+        if kind == "cylinder":  # keep the post above the floor
+            keep_t = d.tip_points[:, 2] > -0.4
+            mids = 0.5 * (d.link_a + d.link_b)
+            keep_l = (mids[:, 2] > -0.4) & (np.minimum(d.link_a[:, 2], d.link_b[:, 2]) > -0.45)
+            d = FitData.create(d.tip_points[keep_t], d.tip_radius[keep_t], 1.0,
+                               d.link_a[keep_l], d.link_b[keep_l], d.link_radius[keep_l], 1.0,
+                               d.free_points, dim=3)
+        parts.append(d)
+        labels_t.append(np.full(d.n_tip, i))
+        labels_l.append(np.full(d.n_link, i))
+    data = merge(*parts)
+    return data, prims, np.concatenate(labels_t + labels_l)

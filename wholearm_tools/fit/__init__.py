@@ -11,13 +11,16 @@ Public API
 from wholearm_tools.fit.core import LOSSES, cost, fit_primitive, residuals
 from wholearm_tools.fit.data import FitData, weight_from_tip_probability
 from wholearm_tools.fit.result import FitResult
+from wholearm_tools.fit.segment import Segmentation, segment
 
 __all__ = [
     "LOSSES",
     "FitData",
     "FitResult",
+    "Segmentation",
     "cost",
     "fit_primitive",
     "residuals",
+    "segment",
     "weight_from_tip_probability",
 ]

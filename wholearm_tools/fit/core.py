@@ -481,7 +481,8 @@ def fit_primitive(
         from ``data.free_points`` and the link axes (which are in free space) against the
         initial guess, or, when they are not conclusive, fits both sides and keeps the one
         with fewer hints on the wrong side, then lower cost, then the side of the base-frame
-        origin.  Ignored for lines and planes, whose fitted normal points to free space.
+        origin.  Ignored for lines and planes, whose fitted normal points to free space (an
+        ``initial`` line or plane is taken with its normal towards free space).
     loss : "linear", "huber" or "cauchy"
         Robust losses are smooth: pseudo-Huber ``d^2 (sqrt(1 + (z/d)^2) - 1)`` and Cauchy
         ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.
@@ -546,8 +547,12 @@ def fit_primitive(
                     f"degenerate data for a {kind}: all contact points {shape}")
 
     # lines and planes: the free side is the side the fitted normal points to
-    given = free_side is not None and not m.linear
-    sides = [float(free_side)] if given else _decide_side(m, nd)
+    if m.linear and initial is not None:
+        sides = [1.0]  # the initial normal points to free space
+    elif free_side is not None and not m.linear:
+        sides = [float(free_side)]
+    else:
+        sides = _decide_side(m, nd)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
     for side in sides:

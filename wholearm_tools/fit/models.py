@@ -177,7 +177,7 @@ def refine_link_points(ctx: InitContext, sd_np: Callable[[FloatArray], FloatArra
 
 
 def segment_min(fn: Callable[[FloatArray], FloatArray], a: FloatArray, b: FloatArray,
-                samples: int = 25, iterations: int = 40) -> tuple[FloatArray, FloatArray]:
+                samples: int = 25, iterations: int = 32) -> tuple[FloatArray, FloatArray]:
     """Minimum of ``fn`` along segments ``a[i]-b[i]`` (sampling + golden section).
 
     Returns ``(value (N,), t (N,))``.
@@ -202,13 +202,15 @@ def segment_min(fn: Callable[[FloatArray], FloatArray], a: FloatArray, b: FloatA
     f1, f2 = f(x1), f(x2)
     for _ in range(iterations):
         left = f1 < f2
+        # keep [lo, x2] when f1 < f2 (the old x1 becomes the new x2), else [x1, hi]
         hi = np.where(left, x2, hi)
         lo = np.where(left, lo, x1)
-        nx1 = hi - g * (hi - lo)
-        nx2 = lo + g * (hi - lo)
-        # golden section reuses one evaluation; recomputing both keeps the code simple
+        nx1 = np.where(left, hi - g * (hi - lo), x2)
+        nx2 = np.where(left, x1, lo + g * (hi - lo))
+        xn = np.where(left, nx1, nx2)
+        fn_ = f(xn)
+        f1, f2 = np.where(left, fn_, f2), np.where(left, f1, fn_)
         x1, x2 = nx1, nx2
-        f1, f2 = f(x1), f(x2)
     t = 0.5 * (lo + hi)
     cand_t = np.stack([t, np.zeros(n), np.ones(n)], axis=1)
     cand_v = np.stack([f(t), vals[:, 0], vals[:, -1]], axis=1)

@@ -1,0 +1,72 @@
+"""Fit-and-grow segmentation on synthetic scenes."""
+
+import numpy as np
+import pytest
+from fit_synth import contacts, merge, param_error, planar_scene, spatial_scene
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.fit import FitData
+from wholearm_tools.fit.segment import segment
+
+
+def _check_scene(seg, prims, labels, data, tol):
+    assert sorted(p.kind for p in seg.primitives) == sorted(k for k, _ in prims)
+    for k, res in enumerate(seg.primitives):
+        members = seg.members(k)
+        true_i = np.bincount(labels[members]).argmax()
+        # almost all members come from one true primitive, and it is recovered
+        assert np.mean(labels[members] == true_i) > 0.95
+        kind, p = prims[true_i]
+        assert res.kind == kind
+        expected = dict(p, normal=p["normal"]) if kind == "plane" else p
+        assert param_error(kind, res.params, expected) < tol
+    assert len(seg.unexplained) <= 0.05 * data.n_contacts
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.002])
+def test_planar_scene_two_lines_and_a_circle(noise):
+    data, prims, labels = planar_scene(np.random.default_rng(0), noise)
+    seg = segment(data, rng=0)
+    _check_scene(seg, prims, labels, data, 1e-6 if noise == 0 else 0.02)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.002])
+def test_spatial_scene_plane_and_cylinder(noise):
+    data, prims, labels = spatial_scene(np.random.default_rng(1), noise)
+    seg = segment(data, rng=0)
+    _check_scene(seg, prims, labels, data, 1e-6 if noise == 0 else 0.02)
+
+
+def test_plane_is_not_reported_as_a_huge_sphere_and_not_split():
+    rng = np.random.default_rng(4)
+    p = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0])}
+    data = contacts("plane", p, 40, 10, 1, rng, noise=0.001)
+    seg = segment(data, kinds=("plane", "sphere", "cylinder"), rng=0)
+    assert [r.kind for r in seg.primitives] == ["plane"]
+
+
+def test_far_contacts_are_unexplained_and_result_is_deterministic():
+    rng = np.random.default_rng(2)
+    p = {"center": np.array([0.0, 0.0]), "radius": 0.5}
+    circ = contacts("circle", p, 25, 5, 1, rng)
+    junk = FitData.create(rng.uniform(2.0, 3.0, (3, 2)), 0.02, dim=2)
+    data = merge(circ, junk)
+    a = segment(data, rng=3)
+    b = segment(data, rng=3)
+    np.testing.assert_array_equal(a.assignment, b.assignment)
+    assert [r.kind for r in a.primitives] == ["circle"]
+    # the three junk tips are contacts 25..27 (tips first)
+    assert set(a.unexplained) >= {25, 26, 27}
+
+
+def test_too_few_contacts_gives_an_empty_segmentation():
+    seg = segment(FitData.create(np.eye(3)[:2]))
+    assert seg.primitives == ()
+    assert np.all(seg.assignment == -1)
+
+
+def test_segment_input_errors():
+    with pytest.raises(InputError, match="cannot be fitted to 2-D"):
+        segment(FitData.create(np.zeros((5, 2))), kinds=("plane",))
+    with pytest.raises(InputError, match="noise"):
+        segment(FitData.create(np.zeros((5, 2))), noise=-1.0)

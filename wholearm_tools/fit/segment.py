@@ -1,0 +1,340 @@
+"""Fit-and-grow segmentation (Leonardis, Gupta & Bajcsy 1995) of tip and link contacts.
+
+1. **Seeds**: up to ``max_seeds`` seed contacts spread by farthest-point sampling (the first one
+   drawn with ``rng``); each seed region is the seed's ``seed_size`` nearest contacts (link
+   contacts are placed at their segment midpoints for neighbourhood purposes only; their
+   residuals are always the true link residuals).
+2. **Seed fits**: every allowed type (cheap ones first) is fitted to every seed region; a type is
+   kept for a seed when its dof-corrected RMS residual is below ``seed_accept * sigma``.
+3. **Noise level** ``sigma``: given, or the lower quartile of the best dof-corrected seed RMS
+   residuals (seeds that straddle two surfaces fit badly, those inside one fit at the noise
+   level), floored at ``1e-6`` of the scene size.
+4. **Growth**: a hypothesis absorbs every contact connected to it (k-nearest-neighbour graph)
+   through contacts whose weighted residual is within ``k_sigma * sigma``; it is refitted (warm
+   start) and grown again until its support stops changing; a refit whose RMS exceeds
+   ``1.5 sigma`` (``sqrt(chi2)`` level) stops the growth.
+5. **Selection** by description length (in nats): a contact left unexplained costs
+   ``log(extent / sigma)`` (its position coded at the noise precision), an explained one
+   ``z^2 / 2`` (``z`` = weighted residual / sigma) and a primitive ``dof / 2 * log(N)`` (BIC).
+   Hypotheses are selected greedily by their saving in description length given those already
+   selected, until no saving is positive, so a plane beats a huge sphere on planar data (same
+   residuals, fewer parameters) and a second primitive on the same surface saves nothing.
+6. **Assignment**: every contact goes to the selected primitive with the smallest residual within
+   ``k_sigma * sigma``; each primitive is refitted on its contacts; contacts explained by none
+   are unexplained (``-1``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from wholearm_tools.errors import InputError
+from wholearm_tools.fit.core import fit_primitive, residuals
+from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.models import MODELS
+from wholearm_tools.fit.result import FitResult
+
+#: default candidate types per dimension, cheapest first
+DEFAULT_KINDS = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
+
+
+@dataclass(frozen=True, slots=True)
+class Segmentation:
+    """Result of :func:`segment`.
+
+    Attributes
+    ----------
+    primitives : tuple[FitResult, ...]
+        The selected primitives, each fitted on its own contacts.
+    assignment : (N,) int
+        Index into :attr:`primitives` of each contact (tips first, then links); -1 unexplained.
+    noise : float
+        The noise level sigma used (metres).
+    description_length : float
+        Total description length of the selected model (nats).
+    """
+
+    primitives: tuple[FitResult, ...]
+    assignment: np.ndarray
+    noise: float
+    description_length: float
+
+    def __post_init__(self) -> None:
+        self.assignment.flags.writeable = False
+
+    @property
+    def unexplained(self) -> np.ndarray:
+        """Contact indices explained by no primitive."""
+        return np.flatnonzero(self.assignment < 0)
+
+    def members(self, k: int) -> np.ndarray:
+        """Contact indices assigned to primitive ``k``."""
+        return np.flatnonzero(self.assignment == k)
+
+
+@dataclass
+class _Hyp:
+    kind: str
+    fit: FitResult
+    members: np.ndarray  # sorted contact indices
+
+
+def _rms_dof(fit: FitResult) -> float:
+    r = fit.residuals
+    dof = MODELS[fit.kind].dof
+    return float(np.sqrt(np.sum(r * r) / max(len(r) - dof, 1)))
+
+
+def _farthest_points(X: np.ndarray, k: int, rng: np.random.Generator) -> list[int]:
+    n = len(X)
+    first = int(rng.integers(n))
+    order = [first]
+    dmin = np.linalg.norm(X - X[first], axis=1)
+    while len(order) < min(k, n):
+        i = int(np.argmax(dmin))
+        if dmin[i] <= 0:
+            break
+        order.append(i)
+        dmin = np.minimum(dmin, np.linalg.norm(X - X[i], axis=1))
+    return order
+
+
+def segment(
+    data: FitData,
+    kinds: tuple[str, ...] | list[str] | None = None,
+    *,
+    noise: float | None = None,
+    k_sigma: float = 3.0,
+    seed_size: int | None = None,
+    max_seeds: int = 16,
+    neighbours: int = 6,
+    min_support: int | None = None,
+    seed_accept: float = 2.5,
+    seed_max_iter: int = 60,
+    rng: int | np.random.Generator | None = 0,
+) -> Segmentation:
+    """Segment contacts into primitives by fit-and-grow with description-length selection.
+
+    Parameters
+    ----------
+    data : FitData
+        All contacts (tips and links) with weights and free-space hints.
+    kinds : sequence of str or None
+        Candidate types, cheapest first; default line, circle (2-D) or plane, sphere, cylinder,
+        cone, torus (3-D).
+    noise : float or None
+        Residual noise level sigma (metres); None estimates it from the seed fits.
+    k_sigma : float
+        Growth/assignment threshold in units of sigma (on weighted residuals, weights scaled
+        to a maximum of 1, so ambiguous contacts are tolerated further).
+    seed_size : int or None
+        Contacts per seed region; default ``max dof + 3`` (5 in 2-D, 10 in 3-D).
+    max_seeds : int
+        Number of seed regions.
+    neighbours : int
+        Neighbours per contact in the adjacency graph used for growth.
+    min_support : int or None
+        Fewest contacts a reported primitive may have; default ``dof + 3`` of its type.
+    rng : seed or Generator
+        Picks the first seed; the result is deterministic for a given seed.
+
+    Returns
+    -------
+    Segmentation
+    """
+    if not isinstance(data, FitData):
+        raise InputError(f"data must be a FitData, got {type(data).__name__}")
+    kinds = tuple(DEFAULT_KINDS[data.dim] if kinds is None else kinds)
+    for k in kinds:
+        if k not in MODELS or MODELS[k].dim != data.dim:
+            raise InputError(f"type {k!r} cannot be fitted to {data.dim}-D data")
+    if not (k_sigma > 0 and max_seeds >= 1 and neighbours >= 1):
+        raise InputError("k_sigma, max_seeds and neighbours must be positive")
+    if noise is not None and not (noise > 0 and math.isfinite(noise)):
+        raise InputError(f"noise must be positive, got {noise!r}")
+    rng = np.random.default_rng(rng)
+    n = data.n_contacts
+    dof_max = max(MODELS[k].dof for k in kinds)
+    seed_size = int(seed_size or dof_max + 3)
+    empty = Segmentation((), np.full(n, -1), float(noise or 0.0), 0.0)
+    if n < seed_size:
+        return empty
+
+    X = data.contact_points()
+    allpts = np.vstack([data.tip_points, data.link_a, data.link_b])
+    extent = float(np.linalg.norm(allpts.max(axis=0) - allpts.min(axis=0)))
+    W = np.concatenate([data.tip_weight, data.link_weight])
+    sw = np.sqrt(W / W.max())
+    D = np.linalg.norm(X[:, None, :] - X[None, :, :], axis=2)
+    order = np.argsort(D, axis=1)
+    adj = np.zeros((n, n), dtype=bool)
+    rows = np.repeat(np.arange(n), min(neighbours, n - 1))
+    adj[rows, order[:, 1:neighbours + 1].ravel()] = True
+    adj |= adj.T
+
+    def min_sup(kind: str) -> int:
+        return int(min_support or MODELS[kind].dof + 3)
+
+    # ---- seed fits
+    seeds = _farthest_points(X, max_seeds, rng)
+    seed_fits: list[tuple[np.ndarray, list[FitResult]]] = []
+    for s in seeds:
+        members = np.sort(order[s, :seed_size])
+        sub = data.take(members)
+        fits = [fit_primitive(k, sub, max_iter=seed_max_iter) for k in kinds]
+        seed_fits.append((members, fits))
+
+    if noise is None:
+        best = [min((_rms_dof(f) for f in fits if f), default=np.inf) for _, fits in seed_fits]
+        finite = np.array([b for b in best if np.isfinite(b)])
+        est = float(np.median(finite)) if finite.size else 0.0
+        sigma = max(est, 1e-6 * extent)
+    else:
+        sigma = float(noise)
+
+    def zres(kind: str, fit: FitResult) -> np.ndarray:
+        return sw * residuals(kind, fit.params, data, fit.free_side) / sigma
+
+    def grow(kind: str, fit: FitResult, members: np.ndarray) -> _Hyp | None:
+        for _ in range(25):
+            z = np.abs(zres(kind, fit))
+            inl = z <= k_sigma
+            # connected component(s) of inliers touching the current members
+            reach = np.zeros(n, dtype=bool)
+            frontier = members[inl[members]]
+            reach[frontier] = True
+            while frontier.size:
+                nxt = np.flatnonzero(adj[frontier].any(axis=0) & inl & ~reach)
+                reach[nxt] = True
+                frontier = nxt
+            new = np.flatnonzero(reach)
+            if np.array_equal(new, members) or new.size < MODELS[kind].dof + 1:
+                break
+            refit = fit_primitive(kind, data.take(new), free_side=fit.free_side,
+                                  initial=fit.params)
+            if not refit or _rms_dof(refit) > 2.0 * sigma:
+                break
+            fit, members = refit, new
+        if members.size < min_sup(kind):
+            return None
+        return _Hyp(kind, fit, members)
+
+    # ---- growth
+    hyps: list[_Hyp] = []
+    seen: set[tuple[str, bytes]] = set()
+    covered = np.zeros(n, dtype=bool)
+    for s, (members, fits) in zip(seeds, seed_fits, strict=True):
+        if covered[s]:
+            continue
+        for kind, f in zip(kinds, fits, strict=True):
+            if not f or _rms_dof(f) > seed_accept * sigma:
+                continue
+            h = grow(kind, f, members)
+            if h is None:
+                continue
+            key = (kind, h.members.tobytes())
+            if key in seen:
+                continue
+            seen.add(key)
+            hyps.append(h)
+            covered[h.members] = True
+
+    # ---- selection by description length
+    c_unexplained = math.log(max(extent / sigma, math.e))
+    cur = np.full(n, c_unexplained)
+    costs = []
+    for h in hyps:
+        z = zres(h.kind, h.fit)
+        e = np.full(n, np.inf)
+        e[h.members] = 0.5 * z[h.members] ** 2
+        costs.append(e)
+    chosen: list[int] = []
+    while True:
+        best_gain, best_k = 0.0, -1
+        for k, h in enumerate(hyps):
+            if k in chosen:
+                continue
+            gain = float(np.sum(np.maximum(cur - costs[k], 0.0)))
+            gain -= 0.5 * MODELS[h.kind].dof * math.log(n)
+            if gain > best_gain:
+                best_gain, best_k = gain, k
+        if best_k < 0:
+            break
+        chosen.append(best_k)
+        cur = np.minimum(cur, costs[best_k])
+
+    # ---- assignment, simplification, merging, final refits
+    def dl(kind: str, fit: FitResult, members: np.ndarray) -> float:
+        z = zres(kind, fit)[members]
+        e = np.minimum(0.5 * z * z, c_unexplained)  # a contact costs at most "unexplained"
+        return float(np.sum(e)) + 0.5 * MODELS[kind].dof * math.log(n)
+
+    def refit_on(kind: str, idx: np.ndarray, prev: FitResult | None) -> FitResult:
+        if prev is not None and prev.kind == kind:
+            return fit_primitive(kind, data.take(idx), free_side=prev.free_side,
+                                 initial=prev.params)
+        return fit_primitive(kind, data.take(idx))
+
+    def simplest(h: _Hyp) -> _Hyp:
+        """A type with fewer parameters that codes the same contacts shorter replaces h."""
+        best, best_dl = h, dl(h.kind, h.fit, h.members)
+        for k in kinds:
+            if MODELS[k].dof >= MODELS[h.kind].dof:
+                continue
+            f = refit_on(k, h.members, None)
+            if f and (d_ := dl(k, f, h.members)) <= best_dl:
+                best, best_dl = _Hyp(k, f, h.members), d_
+        return best
+
+    final = [simplest(hyps[k]) for k in chosen]
+    merged = True
+    while merged and len(final) > 1:  # two primitives where one explains the data -> one
+        merged = False
+        for i in range(len(final)):
+            for j in range(i + 1, len(final)):
+                hi_, hj = final[i], final[j]
+                union = np.union1d(hi_.members, hj.members)
+                base = dl(hi_.kind, hi_.fit, hi_.members) + dl(hj.kind, hj.fit, hj.members)
+                for k in dict.fromkeys(sorted((hi_.kind, hj.kind), key=lambda k: MODELS[k].dof)):
+                    prev = hi_.fit if hi_.kind == k else hj.fit
+                    f = refit_on(k, union, prev)
+                    if f and dl(k, f, union) < base:
+                        final = [h for m_, h in enumerate(final) if m_ not in (i, j)]
+                        final.append(_Hyp(k, f, union))
+                        merged = True
+                        break
+                if merged:
+                    break
+            if merged:
+                break
+
+    assignment = np.full(n, -1)
+    for _ in range(2):
+        if not final:
+            break
+        Z = np.stack([np.abs(zres(h.kind, h.fit)) for h in final])
+        best_i = np.argmin(Z, axis=0)
+        ok = Z[best_i, np.arange(n)] <= k_sigma
+        assignment = np.where(ok, best_i, -1)
+        kept = []
+        for i, h in enumerate(final):
+            idx = np.flatnonzero(assignment == i)
+            if idx.size < min_sup(h.kind):
+                continue
+            refit = refit_on(h.kind, idx, h.fit)
+            kept.append(_Hyp(h.kind, refit if refit else h.fit, idx))
+        final = kept
+    if final:
+        Z = np.stack([np.abs(zres(h.kind, h.fit)) for h in final])
+        best_i = np.argmin(Z, axis=0)
+        ok = Z[best_i, np.arange(n)] <= k_sigma
+        assignment = np.where(ok, best_i, -1)
+    dl = float(np.sum(np.where(assignment >= 0, 0.0, c_unexplained)))
+    for i, h in enumerate(final):
+        idx = assignment == i
+        z = zres(h.kind, h.fit)[idx]
+        dl += float(np.sum(0.5 * z * z)) + 0.5 * MODELS[h.kind].dof * math.log(n)
+    return Segmentation(tuple(h.fit for h in final), assignment.astype(int), sigma, dl)
