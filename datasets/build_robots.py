@@ -63,20 +63,20 @@ SPECS = {
     "well_junction": {
         "name": "well_arm_6r",
         "joints": [
-            {"name": "j1_roll", "origin": [0, 0, 0], "axis": [0, 0, 1], "radius": 0.05,
+            {"name": "j1_roll", "origin": [0, 0, 0], "axis": [0, 0, 1], "radius": 0.045,
              "limits": [-3.1, 3.1], "velocity": 0.8, "effort": 60.0},
-            {"name": "j2_pitch", "origin": [0, 0, 0.12], "axis": [0, 1, 0], "radius": 0.04,
-             "limits": [-1.2, 1.2], "velocity": 0.8, "effort": 60.0},
-            {"name": "j3_pitch", "origin": [0, 0, 0.30], "axis": [0, 1, 0], "radius": 0.032,
+            {"name": "j2_pitch", "origin": [0, 0, 0.10], "axis": [0, 1, 0], "radius": 0.038,
+             "limits": [-1.0, 1.0], "velocity": 0.8, "effort": 60.0},
+            {"name": "j3_pitch", "origin": [0, 0, 0.22], "axis": [0, 1, 0], "radius": 0.03,
              "limits": [-1.8, 1.8], "velocity": 1.0, "effort": 30.0},
-            {"name": "j4_roll", "origin": [0, 0, 0.22], "axis": [0, 0, 1], "radius": 0.026,
+            {"name": "j4_roll", "origin": [0, 0, 0.20], "axis": [0, 0, 1], "radius": 0.025,
              "limits": [-3.1, 3.1], "velocity": 1.2, "effort": 15.0},
-            {"name": "j5_pitch", "origin": [0, 0, 0.06], "axis": [0, 1, 0], "radius": 0.02,
+            {"name": "j5_pitch", "origin": [0, 0, 0.05], "axis": [0, 1, 0], "radius": 0.02,
              "limits": [-1.8, 1.8], "velocity": 1.2, "effort": 10.0},
-            {"name": "j6_pitch", "origin": [0, 0, 0.14], "axis": [1, 0, 0], "radius": 0.015,
+            {"name": "j6_pitch", "origin": [0, 0, 0.12], "axis": [1, 0, 0], "radius": 0.015,
              "limits": [-1.5, 1.5], "velocity": 1.5, "effort": 6.0},
         ],
-        "tip": {"offset": [0, 0, 0.10], "radius": 0.02},
+        "tip": {"offset": [0, 0, 0.08], "radius": 0.02},
     },
 }
 

@@ -77,7 +77,7 @@ class Controller:
     friction: float = 0.01
     dwell: float = 0.1
     retreat_clearance: float = 0.02
-    retreat_fraction: float = 0.2
+    retreat_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("speed", "t_acc", "damping", "dwell"):
