@@ -12,11 +12,14 @@ from wholearm_tools import __version__
 
 #: command modules, each exposing a click command named ``command``
 COMMANDS = (
+    "cli.demo",
     "cli.scenarios",
     "cli.simulate",
     "cli.inspect",
     "cli.contacts",
     "cli.plot_ptip",
+    "cli.reconstruct",
+    "cli.fit",
     "cli.export",
 )
 

@@ -128,7 +128,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages)."""
-    from wholearm_tools.fit import segment
+    from wholearm_tools.fit import fit_primitive, segment
     from wholearm_tools.mesh import support_extent
 
     dim = 2 if planar else 3
@@ -136,20 +136,30 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         raise InputError(f"contacts are {table.dim}-D but the map is {dim}-D")
     kinds = kinds or KINDS_BY_DIM[dim]
     data, order = fit_data_from_table(table, free_points)
-    seg = segment(data, kinds=kinds, loss=loss, noise=noise)
+    seg = segment(data, kinds=kinds, noise=noise)
     assignment = np.full(len(table), -1, dtype=np.int64)
     residual = np.full(len(table), np.nan)
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
-    messages = list(seg.messages)
-    n_tip = int(table.used_as_tip.sum())
-    for pid, fit in enumerate(seg.fits):
-        members = np.flatnonzero(seg.assignment == pid)   # indices into the fit data
+    messages: list[str] = []
+    n_tip = data.n_tip
+    for k, fit in enumerate(seg.primitives):
+        members = seg.members(k)  # sorted: tips first, then links
+        if loss != "linear":
+            # final refit of the segment with the robust loss, so contacts that the
+            # classification got wrong pull less on the parameters
+            robust = fit_primitive(fit.kind, data.take(members), loss=loss, noise=seg.noise,
+                                   initial=dict(fit.params), free_side=fit.free_side)
+            if robust:
+                fit = robust
+            else:
+                messages.append(f"robust refit of a {fit.kind} failed ({robust.message}); "
+                                "kept the least-squares fit")
+        pid = len(primitives)
         rows = order[members]
         assignment[rows] = pid
-        residual[rows] = fit.member_residuals if hasattr(fit, "member_residuals") else np.nan
-        support_pts = _support_points(fit, data, members, n_tip)
-        extent = support_extent(fit.kind, fit.params, support_pts)
+        residual[rows] = fit.residuals
+        extent = support_extent(fit.kind, fit.params, _support_points(fit, data, members, n_tip))
         ci95 = {k: (np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)) / 2
                 for k, (lo, hi) in fit.ci95.items()}
         primitives.append(MappedPrimitive(
