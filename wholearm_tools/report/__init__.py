@@ -1,1 +1,21 @@
-"""report"""
+"""Accuracy against ground truth, the well-junction summary and the PDF report.
+
+:func:`evaluate` (``metrics``) and :func:`junction_summary` (``junction``) are pure numpy;
+:func:`write_report` (``pdf``) imports matplotlib and pyvista only when called.
+"""
+
+from wholearm_tools.report.junction import Estimate, JunctionSummary, junction_summary
+from wholearm_tools.report.metrics import (
+    AccuracyReport,
+    ClassificationMetrics,
+    PrimitiveAccuracy,
+    SurfaceRecovery,
+    classification_metrics,
+    evaluate,
+    match_contacts,
+)
+from wholearm_tools.report.pdf import ReportInfo, write_report
+
+__all__ = ["AccuracyReport", "ClassificationMetrics", "Estimate", "JunctionSummary",
+           "PrimitiveAccuracy", "ReportInfo", "SurfaceRecovery", "classification_metrics",
+           "evaluate", "junction_summary", "match_contacts", "write_report"]
