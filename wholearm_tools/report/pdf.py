@@ -779,11 +779,11 @@ def write_report(path: str | os.PathLike[str], rec: Any, *, title: str | None = 
     if ptip_steps < 2:
         raise ValueError(f"ptip_steps must be >= 2, got {ptip_steps}")
     path = Path(path)
-    pages, accuracy, junction = build_pages(rec, title=title, ptip_steps=ptip_steps)
     meta = {"Title": title or f"wholearm report {Path(str(rec.run.source)).name}",
             "Creator": "wholearm_tools", "Producer": "wholearm_tools (matplotlib)",
             "CreationDate": None}
-    with atomic_path(path, ".pdf") as tmp:
+    with atomic_path(path, ".pdf") as tmp:   # fails fast on a missing folder
+        pages, accuracy, junction = build_pages(rec, title=title, ptip_steps=ptip_steps)
         with PdfPages(tmp, metadata=meta) as pdf:
             for _, fig in pages:
                 pdf.savefig(fig)
