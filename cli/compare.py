@@ -1,0 +1,77 @@
+"""``wholearm compare a.mcap [b.mcap ...] --B 0.005 --B 0.02 -o cmp/``: reconstruct every log with
+every B and tabulate the results side by side (comparison.csv, .json, .pdf)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from cli.options import (
+    command_topic_option,
+    joint_topic_option,
+    json_option,
+    overwrite_option,
+    prepare_output_dir,
+    robot_option,
+)
+
+
+@click.command("compare")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--B", "Bs", type=click.FloatRange(min=0.0, min_open=True), multiple=True,
+              required=True, help="Smallest expected surface curvature radius B [m] "
+              "(repeat for each value to compare).")
+@click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Output folder (comparison.csv, .json, .pdf).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Dask scheduler address (tcp://host:port); default: local processes.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Local worker processes (default: one per core, at most one per run).")
+@click.option("--causal", is_flag=True, help="Classify with the map as seen live.")
+@click.option("--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
+              show_default=True, help="Fit loss.")
+@robot_option
+@joint_topic_option
+@command_topic_option
+@json_option
+@overwrite_option
+def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
+            scheduler: str | None, workers: int | None, causal: bool, loss: str,
+            robot_file: Path | None, joint_topic: str | None, command_topic: str | None,
+            as_json: bool, overwrite: bool) -> None:
+    """Reconstruct every LOG with every --B value and compare the results.
+
+    Prints the table (or JSON with --json); a (log, B) pair that fails shows its error in the
+    table, and the command then exits with status 1 after writing the outputs.
+    """
+    from wholearm_tools.compare import OUTPUT_NAMES, compare_runs, write_comparison
+    from wholearm_tools.errors import WholearmError
+
+    for log in logs:
+        if not log.exists():
+            raise click.ClickException(f"{log}: no such log file")
+        if not log.is_file():
+            raise click.ClickException(f"{log}: not a log file")
+    prepare_output_dir(out_dir, list(OUTPUT_NAMES), overwrite)
+    read_options = {"joint_topic": joint_topic, "command_topic": command_topic,
+                    "robot": str(robot_file) if robot_file else None, "require_commands": True}
+    try:
+        table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
+                             read_options=read_options, causal=causal, loss=loss)
+        paths = write_comparison(out_dir, table)
+    except WholearmError as exc:  # one line, however the command is mounted
+        raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
+                               **table.to_json()}))
+    else:
+        click.echo(table.to_text())
+        click.echo(f"wrote {paths['csv']}, {paths['json']} and {paths['pdf']}")
+    failed = table.failed
+    if failed:
+        first = failed[0]
+        raise click.ClickException(
+            f"{len(failed)} of {len(table)} runs failed; first: {first['log']} "
+            f"B={first['B']:g}: {first['error']}")
