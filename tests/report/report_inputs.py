@@ -21,7 +21,7 @@ def make_truth(surfaces, t, link, kind, point, surface) -> GroundTruth:
 
 
 def junction_surfaces(main_point=(0.0, 0.0, 0.35), main_axis=(0.0, 0.0, 1.0), main_r=0.18,
-                      branch_axis=(np.sqrt(0.5), 0.0, np.sqrt(0.5)), branch_r=0.12):
+                      branch_axis=(0.7071067811865476, 0.0, 0.7071067811865476), branch_r=0.12):
     main = {"type": "cylinder", "params": {"point": list(main_point), "axis": list(main_axis),
                                            "radius": main_r}}
     branch = {"type": "cylinder", "params": {"point": list(main_point),

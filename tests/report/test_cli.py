@@ -23,12 +23,15 @@ def test_report_from_log_then_refuses_to_overwrite(planar_rec, tmp_path):
     res = _invoke(log, "-o", out, "--B", planar_rec.params.B)
     assert res.exit_code == 0, res.output
     assert out.read_bytes().startswith(b"%PDF")
-    assert "Contacts:" in res.output and "Accuracy against ground truth" in res.output
+    assert "Contacts:" in res.output
+    assert "Accuracy against ground truth" in res.output
     before = out.read_bytes()
     res = _invoke(log, "-o", out)
     assert res.exit_code == 1
     lines = res.output.strip().splitlines()
-    assert len(lines) == 1 and "already exists" in lines[0] and "--overwrite" in lines[0]
+    assert len(lines) == 1
+    assert "already exists" in lines[0]
+    assert "--overwrite" in lines[0]
     assert out.read_bytes() == before
 
 
@@ -58,9 +61,11 @@ def test_output_folder_without_a_run_is_a_clear_error(planar_rec, tmp_path):
     data["meta"].pop("source")
     (out_dir / "map.json").write_text(json.dumps(data))
     res = _invoke(out_dir, "-o", tmp_path / "r.pdf")
-    assert res.exit_code == 1 and "records no run log" in res.output
+    assert res.exit_code == 1
+    assert "records no run log" in res.output
     res = _invoke(tmp_path, "-o", tmp_path / "r.pdf")
-    assert res.exit_code == 1 and "no map.json" in res.output
+    assert res.exit_code == 1
+    assert "no map.json" in res.output
     assert not (tmp_path / "r.pdf").exists()
 
 
@@ -68,4 +73,5 @@ def test_output_must_be_a_pdf(tmp_path):
     log = tmp_path / "run.mcap"
     log.write_bytes(b"")
     res = _invoke(log, "-o", tmp_path / "r.png")
-    assert res.exit_code == 2 and ".pdf" in res.output
+    assert res.exit_code == 2
+    assert ".pdf" in res.output

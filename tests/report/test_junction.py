@@ -34,7 +34,8 @@ def test_exact_values_for_a_45_degree_lateral():
     assert j.window_azimuth_deg.value == pytest.approx(0.0, abs=1e-9)
     assert j.axis_offset.value == pytest.approx(0.0, abs=1e-12)
     assert j.reference == pytest.approx((1.0, 0.0, 0.0))
-    assert j.main_diameter.truth is None and j.main_diameter.error is None
+    assert j.main_diameter.truth is None
+    assert j.main_diameter.error is None
     assert np.isnan(j.angle_deg.half95)            # no covariance, no uncertainty
 
 
@@ -71,10 +72,12 @@ def test_truth_values_and_errors():
     prims = _map()
     prims[1] = cylinder(1, C + 0.2 * V45, V45, 0.123, (0.2, 0.7))
     j = junction_summary(fake_rec(prims, truth))
-    assert j.main_diameter.truth == pytest.approx(0.36) and j.main_diameter.error == \
+    assert j.main_diameter.truth == pytest.approx(0.36)
+    assert j.main_diameter.error == \
         pytest.approx(0.0, abs=1e-12)
     assert j.lateral_diameter.error == pytest.approx(0.006)
-    assert j.angle_deg.truth == pytest.approx(45.0) and j.window_position.truth == \
+    assert j.angle_deg.truth == pytest.approx(45.0)
+    assert j.window_position.truth == \
         pytest.approx(0.35)
     assert j.window_azimuth_deg.truth == pytest.approx(0.0, abs=1e-9)
     d = json.loads(json.dumps(j.to_dict()))
@@ -93,7 +96,8 @@ def test_uncertainty_from_the_covariance_is_propagated_and_seeded():
     rec = fake_rec(prims)
     j = junction_summary(rec, samples=20000)
     assert j.main_diameter.half95 == pytest.approx(1.96 * 2 * sigma, rel=0.03)
-    assert j.lateral_diameter.half95 == 0.0 and j.angle_deg.half95 == pytest.approx(0.0)
+    assert j.lateral_diameter.half95 == 0.0
+    assert j.angle_deg.half95 == pytest.approx(0.0)
     # an axis tilt variance shows up in the angle, not in the diameters
     tilt = np.zeros((7, 7))
     tilt[3, 3] = np.radians(0.5) ** 2

@@ -40,13 +40,15 @@ def test_confusion_link_accuracy_and_calibration_counts():
     assert (m.n_detected, m.n_truth, m.n_matched, m.n_false, m.n_missed) == (6, 6, 5, 1, 1)
     assert m.truth_index.tolist() == [0, 1, 2, 3, 4, -1]
     np.testing.assert_array_equal(m.confusion, [[2, 1, 0], [0, 1, 1]])
-    assert m.link_correct == 4 and m.link_accuracy == pytest.approx(0.8)
+    assert m.link_correct == 4
+    assert m.link_accuracy == pytest.approx(0.8)
     assert m.class_accuracy == pytest.approx(3 / 4)
     assert m.ambiguous_fraction == pytest.approx(1 / 5)
     np.testing.assert_array_equal(m.bin_count, [2, 0, 1, 0, 2])
     assert m.bin_mean_p[0] == pytest.approx(0.075)
     assert m.bin_tip_fraction[0] == pytest.approx(0.5)       # one joint, one body
-    assert m.bin_tip_fraction[2] == 0.0 and m.bin_tip_fraction[4] == 1.0
+    assert m.bin_tip_fraction[2] == 0.0
+    assert m.bin_tip_fraction[4] == 1.0
     brier = np.mean(np.square([0.9 - 1, 0.1 - 1, 0.05, 0.5, 0.95 - 1]))
     assert m.brier == pytest.approx(brier)
     d = json.loads(json.dumps(m.to_dict()))
@@ -78,9 +80,13 @@ def _true(kind, params, sid=4):
 def test_perfect_fit_has_zero_error():
     truth = _true("circle", {"center": [0.3, 0.25], "radius": 0.07})
     a = primitive_accuracy(_circle(0.07), truth, matched_by="contacts")
-    assert a.type_correct and a.truth_id == 4
-    assert a.size_error == 0.0 and a.size_error_pct == 0.0 and a.position_error == 0.0
-    assert a.surface_rms < 1e-12 and a.surface_max < 1e-12
+    assert a.type_correct
+    assert a.truth_id == 4
+    assert a.size_error == 0.0
+    assert a.size_error_pct == 0.0
+    assert a.position_error == 0.0
+    assert a.surface_rms < 1e-12
+    assert a.surface_max < 1e-12
 
 
 def test_radius_offset_gives_percent_error_and_surface_deviation():
@@ -88,7 +94,8 @@ def test_radius_offset_gives_percent_error_and_surface_deviation():
     a = primitive_accuracy(_circle(0.0735), truth, matched_by="contacts")
     assert a.size_error == pytest.approx(0.0035)
     assert a.size_error_pct == pytest.approx(5.0)
-    assert a.surface_rms == pytest.approx(0.0035) and a.surface_max == pytest.approx(0.0035)
+    assert a.surface_rms == pytest.approx(0.0035)
+    assert a.surface_max == pytest.approx(0.0035)
 
 
 def test_axis_angle_position_and_wrong_type():
@@ -106,9 +113,12 @@ def test_axis_angle_position_and_wrong_type():
                                       "polygon": [[0, 0], [0.1, 0], [0.1, 0.1], [0, 0.1]]})
     b = primitive_accuracy(flipped, plane_truth, matched_by="distance")
     assert b.axis_angle_deg == pytest.approx(0.0, abs=1e-6)    # a normal's sign is free
-    assert b.position_error == pytest.approx(0.01) and b.surface_rms == pytest.approx(0.01)
+    assert b.position_error == pytest.approx(0.01)
+    assert b.surface_rms == pytest.approx(0.01)
     c = primitive_accuracy(fit, plane_truth, matched_by="contacts")
-    assert not c.type_correct and c.size_error is None and c.axis_angle_deg is None
+    assert not c.type_correct
+    assert c.size_error is None
+    assert c.axis_angle_deg is None
 
 
 def _junction_case():
@@ -151,15 +161,18 @@ def test_evaluate_matches_primitives_and_reports_found_and_missed():
     assert p0.axis_angle_deg == pytest.approx(0.0, abs=1e-6)
     assert (p1.truth_id, p1.matched_by) == (1, "contacts")
     assert p1.size_error_pct == pytest.approx(5.0)
-    assert p2.matched_by == "distance" and not p2.type_correct
+    assert p2.matched_by == "distance"
+    assert not p2.type_correct
     assert [s.found_by for s in acc.surfaces] == [(0,), (1,)]
-    assert acc.n_found == 2 and acc.n_touched == 2 and acc.missed == ()
+    assert acc.n_found == 2
+    assert acc.n_touched == 2
+    assert acc.missed == ()
     assert acc.classification.n_matched == 9
     json.dumps(acc.to_dict())
 
 
 def test_surface_touched_but_not_found_is_missed():
-    rec, truth = _junction_case()
+    rec, _truth = _junction_case()
     rec.surface_map = type(rec.surface_map)(planar=False, B=0.02,
                                             primitives=rec.surface_map.primitives[:1])
     rec.table.primitive = np.array([0] * 6 + [-1] * 3)

@@ -32,18 +32,22 @@ def _without_truth(rec):
 
 
 def test_report_with_truth_has_accuracy_pages(planar_rec, tmp_path):
-    assert planar_rec.run.truth is not None and len(planar_rec.table) > 0
+    assert planar_rec.run.truth is not None
+    assert len(planar_rec.table) > 0
     out = tmp_path / "report.pdf"
     info = write_report(out, planar_rec, title="paper_planar test")
     assert out.read_bytes().startswith(b"%PDF")
-    assert info.pages[0] == "Summary" and info.pages[1] == "Map"
+    assert info.pages[0] == "Summary"
+    assert info.pages[1] == "Map"
     assert info.pages[-2:] == ("Accuracy: primitives", "Accuracy: contacts")
     assert "Well junction" not in info.pages                    # planar: no junction page
     assert info.n_pages == _expected_base_pages(planar_rec) + 2
     assert _pdf_pages(out) == info.n_pages
-    assert info.accuracy is not None and info.accuracy.classification.n_matched > 0
+    assert info.accuracy is not None
+    assert info.accuracy.classification.n_matched > 0
     text = "\n".join(report_pdf.summary_lines(planar_rec, info.accuracy, None))
-    assert "Accuracy against ground truth" in text and "Primitives found" in text
+    assert "Accuracy against ground truth" in text
+    assert "Primitives found" in text
 
 
 def test_report_without_truth_omits_accuracy_pages(planar_rec, tmp_path):
@@ -87,7 +91,8 @@ def test_failure_leaves_no_file_and_keeps_the_old_one(planar_rec, tmp_path, monk
     calls["n"] = 0
     with pytest.raises(RuntimeError, match="disk full"):
         write_report(out, _without_truth(planar_rec), ptip_steps=5)
-    assert out.read_bytes() == b"old" and list(tmp_path.iterdir()) == [out]
+    assert out.read_bytes() == b"old"
+    assert list(tmp_path.iterdir()) == [out]
 
 
 def test_bad_arguments(planar_rec, tmp_path):

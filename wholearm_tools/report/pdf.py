@@ -26,8 +26,10 @@ from the local OpenGL implementation; another Mesa version may change their pixe
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +46,7 @@ ROWS_PER_TABLE_PAGE = 26
 HISTS_PER_PAGE = 6
 VIEWS = (("isometric", (1.0, -1.4, 0.9)), ("front (x–z)", (0.0, -1.0, 0.0)),
          ("side (y–z)", (1.0, 0.0, 0.0)), ("top (x–y)", (0.0, 0.0, 1.0)))
+WRAP = 76                           # characters per summary line
 SIZE_KEYS = ("radius", "major_radius", "minor_radius", "half_angle")
 
 
@@ -107,11 +110,9 @@ def _link_contact_segments(rec: Any) -> tuple[np.ndarray, np.ndarray]:
     for pid in np.unique(prim_of[prim_of >= 0]):
         sel = prim_of == pid
         free_side = float(getattr(fits[pid], "free_side", 1.0)) if pid < len(fits) else 1.0
-        try:
+        with contextlib.suppress(Exception):   # a drawing aid only: keep the link middle
             _, t[sel] = by_id[int(pid)].primitive.segment_signed_distance(
                 a[sel], b[sel], free_side=free_side)
-        except Exception:  # noqa: BLE001 - a drawing aid only: keep the link middle
-            pass
     centre = a + t[:, None] * (b - a)
     half = 0.15 * (b - a)
     return np.stack([centre - half, centre + half], axis=1), rows
@@ -158,7 +159,7 @@ def draw_planar_map(ax: Any, rec: Any, *, legend: bool = True, colorbar: bool = 
     for p in rec.surface_map.primitives:
         try:
             curves.append((p, polyline(p.kind, p.params, p.extent, 0.005)))
-        except Exception:  # noqa: BLE001 - a primitive without a drawable extent is listed only
+        except Exception:
             continue
     segs, seg_rows = _link_contact_segments(rec)
     tips = np.flatnonzero(np.asarray(table.used_as_tip))
@@ -230,7 +231,7 @@ def render_views(rec: Any, *, size: tuple[int, int] = (900, 700),
     for p in rec.surface_map.primitives:
         try:
             m = primitive_mesh(p, resolution=0.01)
-        except Exception:  # noqa: BLE001 - listed in the table even if it cannot be meshed
+        except Exception:
             continue
         if m.n_vertices:
             faces = np.hstack([np.full((len(m.triangles), 1), 3), m.triangles]).ravel()
@@ -262,7 +263,8 @@ def render_views(rec: Any, *, size: tuple[int, int] = (900, 700),
         pl.add_mesh(pv.Sphere(radius=0.015, center=(0.0, 0.0, 0.0)), color="black")
         pl.show_axes()
         pl.camera_position = _camera(rec, direction)
-        pl.camera.zoom(1.15)
+        pl.reset_camera()               # fit every actor (meshes and contacts) in the view
+        pl.camera.zoom(1.1)
         img = pl.screenshot(return_img=True)
         pl.close()
         out.append((title, np.asarray(img)[:, :, :3]))
@@ -311,7 +313,7 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
     n_tip, n_link = int(np.sum(labels == "tip")), int(np.sum(labels == "link"))
     n_amb = n - n_tip - n_link
     kind = "planar" if m.planar else "spatial"
-    lines = [f"Run: {rec.run.source}",
+    lines = [*textwrap.wrap(f"Run: {rec.run.source}", WRAP, subsequent_indent="     "),
              f"{kind} arm, {rec.run.robot.dof} joints; log {rec.run.log.duration:.1f} s "
              f"at {rec.run.log.rate:.0f} Hz",
              f"B = {rec.params.B:g} m (smallest expected curvature radius)"
@@ -335,7 +337,8 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
                   f"  link identified right: {_pct(c.link_accuracy)}",
                   f"  tip/link labels right: {_pct(c.class_accuracy)} of decided "
                   f"({_pct(c.ambiguous_fraction)} ambiguous)",
-                  f"  true surfaces found: {accuracy.n_found} of {accuracy.n_touched} touched"]
+                  f"  true surfaces found: {accuracy.n_found} of {len(accuracy.surfaces)} "
+                  f"({accuracy.n_touched} touched by the arm)"]
         sizes = [a for a in accuracy.primitives if a.size_error_pct is not None
                  and a.kind != "cone"]
         if sizes:
@@ -360,7 +363,9 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
             warnings.append(f"#{a.primitive_id} is a {a.kind} but true surface {a.truth_id} "
                             f"is a {a.truth_kind}")
     if warnings:
-        lines += ["", "Warnings:"] + [f"  ! {w}" for w in warnings[:8]]
+        lines += ["", "Warnings:"]
+        for w in warnings[:8]:
+            lines += textwrap.wrap(w, WRAP, initial_indent="  ! ", subsequent_indent="    ")
         if len(warnings) > 8:
             lines.append(f"  ! … {len(warnings) - 8} more")
     return lines
@@ -422,7 +427,7 @@ def _summary_page(rec: Any, title: str, accuracy: AccuracyReport | None,
         draw_planar_map(ax, rec, legend=False, colorbar=True)
         ax.set_title("map (true surfaces dashed)", fontsize=9)
     elif views:
-        ax = fig.add_axes((0.56, 0.16, 0.40, 0.70))
+        ax = fig.add_axes((0.50, 0.10, 0.45, 0.78))
         _show_image(ax, views[0][1], f"map, {views[0][0]} view (contacts coloured by P_T)")
         _ptip_colorbar(fig, (0.965, 0.3, 0.01, 0.4))
     return fig
@@ -723,7 +728,8 @@ def _junction_page(j: JunctionSummary) -> Any:
         "Axis offset: distance between the two axes at their closest approach (0 for "
         "intersecting bores).",
     ]
-    fig.text(0.04, 0.38, "\n".join(notes), fontsize=8.5, va="top", wrap=True)
+    fig.text(0.04, 0.58, "\n".join("\n".join(textwrap.wrap(n, 150)) for n in notes),
+             fontsize=8.5, va="top", linespacing=1.5)
     return fig
 
 
