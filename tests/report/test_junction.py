@@ -117,6 +117,12 @@ def test_main_bore_is_the_cylinder_holding_the_base():
 
 def test_not_a_junction():
     assert junction_summary(fake_rec(_map()[:1])) is None
+    posts = [cylinder(0, (0.5, 0.0, 0.0), (0, 0, 1), 0.05, (0, 0.2)),   # base outside both
+             cylinder(1, (0.0, 0.5, 0.0), (1, 0, 0), 0.05, (0, 0.2))]
+    assert junction_summary(fake_rec(posts)) is None
+    far = _map()
+    far[1] = cylinder(1, (0.6, 0.0, 0.0), (0, 1, 0), 0.05, (0, 0.2))   # axis outside the bore
+    assert junction_summary(fake_rec(far)) is None
     assert junction_summary(fake_rec([], planar=True)) is None
     with pytest.raises(InputError, match="samples must be >= 2"):
         junction_summary(fake_rec(_map()), samples=1)

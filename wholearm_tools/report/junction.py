@@ -3,8 +3,9 @@
 Conventions (all in the robot base frame, metres and degrees)
 -------------------------------------------------------------
 * **Main bore**: the fitted cylinder whose interior contains the robot base (the origin); when
-  none or several do, the one with the most supporting contacts among them.  **Lateral**: the
-  other cylinder with the most support.
+  several do, the one with the most supporting contacts.  **Lateral**: among the other cylinders
+  whose axis passes inside the main bore (a branch, not a post elsewhere), the one with the most
+  support.  No main bore or no lateral: no junction summary.
 * **Main axis direction** ``u``: oriented from the base towards the window (the closest approach
   of the two axes), so the window position is >= 0 when it lies beyond the base.
 * **Lateral direction** ``v``: oriented from the window into the branch, i.e. towards the centre
@@ -232,22 +233,38 @@ def _branch_mid(p: Any) -> FloatArray | None:
     return np.asarray(p.params["point"], float) + 0.5 * (s[0] + s[1]) * _unit(p.params["axis"])
 
 
-def pick_bores(primitives: Sequence[Any], base: Any = (0.0, 0.0, 0.0)) -> tuple[Any, Any] | None:
-    """(main, lateral) among a map's cylinders; None unless there are at least two."""
-    cyl = [p for p in primitives if p.kind == "cylinder"]
-    if len(cyl) < 2:
-        return None
+def _contains(p: Any, point: FloatArray) -> bool:
+    a = _unit(p.params["axis"])
+    r = point - np.asarray(p.params["point"], float)
+    return float(np.linalg.norm(r - (r @ a) * a)) < float(p.params["radius"])
+
+
+def main_bore(primitives: Sequence[Any], base: Any = (0.0, 0.0, 0.0)) -> Any | None:
+    """The cylinder holding the robot base with the most support, or None."""
     base = np.asarray(base, float)
+    holders = [p for p in primitives if p.kind == "cylinder" and _contains(p, base)]
+    return max(holders, key=lambda p: (_support(p), -p.id)) if holders else None
 
-    def inside(p: Any) -> bool:
-        a = _unit(p.params["axis"])
-        r = base - np.asarray(p.params["point"], float)
-        return float(np.linalg.norm(r - (r @ a) * a)) < float(p.params["radius"])
 
-    holders = [p for p in cyl if inside(p)] or cyl
-    main = max(holders, key=lambda p: (_support(p), -p.id))
-    lateral = max((p for p in cyl if p is not main), key=lambda p: (_support(p), -p.id))
-    return main, lateral
+def pick_bores(primitives: Sequence[Any], base: Any = (0.0, 0.0, 0.0)) -> tuple[Any, Any] | None:
+    """(main, lateral): the main bore (:func:`main_bore`) and, among the other cylinders whose
+    axis passes within the main bore (a branch of it, not a post standing elsewhere), the one
+    with the most support.  None when there is no such pair."""
+    main = main_bore(primitives, base)
+    if main is None:
+        return None
+    p, u = np.asarray(main.params["point"], float), _unit(main.params["axis"])
+    radius = float(main.params["radius"])
+
+    def branches(c: Any) -> bool:
+        q, v = np.asarray(c.params["point"], float), _unit(c.params["axis"])
+        s, r = _closest_params(p, u, q, v)
+        return float(np.linalg.norm(p + s * u - (q + r * v))) < radius
+
+    laterals = [c for c in primitives if c.kind == "cylinder" and c is not main and branches(c)]
+    if not laterals:
+        return None
+    return main, max(laterals, key=lambda c: (_support(c), -c.id))
 
 
 def _true_junction(truth: Any) -> dict[str, Any] | None:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from wholearm_tools._io import atomic_path
-from wholearm_tools.report.junction import JunctionSummary, junction_summary
+from wholearm_tools.report.junction import JunctionSummary, junction_summary, main_bore
 from wholearm_tools.report.metrics import AccuracyReport, evaluate, true_surfaces
 
 PAGE_SIZE = (11.69, 8.27)            # A4 landscape, inches
@@ -325,9 +325,14 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
         size = _key_size(p)
         sup = f"{p.support.get('tip', 0)} tip + {p.support.get('link', 0)} link"
         lines.append(f"  #{p.id} {p.kind:<8} {size + ';' if size else ''} {sup}, "
-                     f"rms {p.rms_residual * 1e3:.1f} mm")
+                     f"rms {p.rms_residual * 1e3:.2f} mm")
     if len(m.primitives) > len(shown):
         lines.append(f"  … {len(m.primitives) - len(shown)} more (see the primitives table)")
+    bore = main_bore(m.primitives) if junction is None and not m.planar else None
+    if bore is not None:
+        lines += ["", *textwrap.wrap(f"Bore: #{bore.id} cylinder around the robot base, "
+                                     f"{_key_size(bore)}; no lateral branch found", WRAP,
+                                     subsequent_indent="  ")]
     unexplained = int(np.sum(np.asarray(table.primitive) < 0)) if n else 0
     if accuracy is not None:
         c = accuracy.classification
@@ -339,6 +344,10 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
                   f"({_pct(c.ambiguous_fraction)} ambiguous)",
                   f"  true surfaces found: {accuracy.n_found} of {len(accuracy.surfaces)} "
                   f"({accuracy.n_touched} touched by the arm)"]
+        untouched = [f"{s.truth_id} ({s.kind})" for s in accuracy.surfaces if not s.touched]
+        if untouched:
+            lines += textwrap.wrap("never touched: " + ", ".join(untouched), WRAP,
+                                   initial_indent="  ", subsequent_indent="    ")
         sizes = [a for a in accuracy.primitives if a.size_error_pct is not None
                  and a.kind != "cone"]
         if sizes:
