@@ -31,7 +31,7 @@ def _readonly(arr: ArrayLike) -> FloatArray:
 
 
 def rotation_about_axis(axis: FloatArray, angle: FloatArray) -> FloatArray:
-    """Rodrigues rotation matrices for a unit ``axis (3,)`` and ``angle (...)`` → ``(..., 3, 3)``."""
+    """Rodrigues rotation matrices: unit ``axis (3,)`` and ``angle (...)`` → ``(..., 3, 3)``."""
     x, y, z = axis
     k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     angle = np.asarray(angle, dtype=float)[..., None, None]
@@ -189,11 +189,12 @@ class RobotModel:
         """World transforms of every joint frame after rotation, ``(..., n, 4, 4)``."""
         q = self.check_q(q)
         batch = q.shape[:-1]
-        out = np.empty(batch + (self.dof, 4, 4))
-        current = np.broadcast_to(np.eye(4), batch + (4, 4))
+        out = np.empty((*batch, self.dof, 4, 4))
+        current = np.broadcast_to(np.eye(4), (*batch, 4, 4))
         for i in range(self.dof):
-            local = np.broadcast_to(self.origins[i], batch + (4, 4)).copy()
-            local[..., :3, :3] = self.origins[i, :3, :3] @ rotation_about_axis(self.axes[i], q[..., i])
+            local = np.broadcast_to(self.origins[i], (*batch, 4, 4)).copy()
+            rot = rotation_about_axis(self.axes[i], q[..., i])
+            local[..., :3, :3] = self.origins[i, :3, :3] @ rot
             current = current @ local
             out[..., i, :, :] = current
         return out
@@ -201,7 +202,7 @@ class RobotModel:
     def joint_positions(self, q: ArrayLike) -> FloatArray:
         """Joint origins and the tip point, ``(..., n + 1, 3)``; link ``i`` spans rows i, i+1."""
         frames = self.frames(q)
-        pts = np.empty(frames.shape[:-3] + (self.dof + 1, 3))
+        pts = np.empty((*frames.shape[:-3], self.dof + 1, 3))
         pts[..., : self.dof, :] = frames[..., :3, 3]
         last = frames[..., -1, :, :]
         pts[..., self.dof, :] = last[..., :3, :3] @ self.tip_offset + last[..., :3, 3]
@@ -238,7 +239,7 @@ class RobotModel:
         batch = np.broadcast_shapes(q.shape[:-1], link.shape, s.shape)
         pts = np.broadcast_to(pts, batch + pts.shape[-2:])
         axes = np.broadcast_to(axes, batch + axes.shape[-2:])
-        qd = np.broadcast_to(qd, batch + (self.dof,))
+        qd = np.broadcast_to(qd, (*batch, self.dof))
         link = np.broadcast_to(link, batch)
         s = np.broadcast_to(s, batch)
         if np.any((link < 0) | (link >= self.dof)):
@@ -252,7 +253,7 @@ class RobotModel:
         return np.sum(contrib * mask[..., None], axis=-2)
 
     def contact_radius(self, link: int, tip: bool) -> float:
-        """Radius ``w`` for a contact on ``link``: tip/joint sphere if ``tip`` else link cylinder."""
+        """Contact radius ``w`` on ``link``: tip/joint sphere if ``tip``, else link cylinder."""
         if not tip:
             return float(self.link_radii[link])
         if link == self.dof - 1:
