@@ -21,6 +21,7 @@ COMMANDS = (
     "cli.reconstruct",
     "cli.fit",
     "cli.export",
+    "cli.report",
     "cli.compare",
 )
 
