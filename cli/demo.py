@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import click
+import numpy as np
 
 from cli.reconstruct import summary_lines
 
@@ -74,7 +75,8 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
         out_dir / "overlay.mcap", rec.surface_map,
         contact_points=table.tip_center[table.used_as_tip],
         contact_p_tip=table.p_tip[table.used_as_tip],
-        contact_segments=(table.seg_a[~table.used_as_tip], table.seg_b[~table.used_as_tip]),
+        contact_segments=np.stack([table.seg_a[~table.used_as_tip],
+                                   table.seg_b[~table.used_as_tip]], axis=1),
         t0_ns=rec.run.log.t0_ns)
     click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
 
