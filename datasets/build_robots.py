@@ -61,22 +61,23 @@ SPECS = {
         "tip": {"offset": [0.30, 0, 0], "radius": 0.0},
     },
     "well_junction": {
-        "name": "well_arm_6r",
+        # tool body (j1 roll + 0.30 m nose) on the main-bore axis; the shoulder j2 sits 0.30 m up
+        # the axis, the elbow j3/j4 (roll + pitch) at the junction centre, so the distal links
+        # can turn into the lateral branch, fold back below the junction or sweep the bore wall
+        "name": "well_arm_5r",
         "joints": [
-            {"name": "j1_roll", "origin": [0, 0, 0], "axis": [0, 0, 1], "radius": 0.045,
+            {"name": "j1_roll", "origin": [0, 0, 0], "axis": [0, 0, 1], "radius": 0.05,
              "limits": [-3.1, 3.1], "velocity": 0.8, "effort": 60.0},
-            {"name": "j2_pitch", "origin": [0, 0, 0.10], "axis": [0, 1, 0], "radius": 0.038,
-             "limits": [-1.0, 1.0], "velocity": 0.8, "effort": 60.0},
-            {"name": "j3_pitch", "origin": [0, 0, 0.22], "axis": [0, 1, 0], "radius": 0.03,
-             "limits": [-1.8, 1.8], "velocity": 1.0, "effort": 30.0},
-            {"name": "j4_roll", "origin": [0, 0, 0.20], "axis": [0, 0, 1], "radius": 0.025,
-             "limits": [-3.1, 3.1], "velocity": 1.2, "effort": 15.0},
-            {"name": "j5_pitch", "origin": [0, 0, 0.05], "axis": [0, 1, 0], "radius": 0.02,
-             "limits": [-1.8, 1.8], "velocity": 1.2, "effort": 10.0},
-            {"name": "j6_pitch", "origin": [0, 0, 0.12], "axis": [1, 0, 0], "radius": 0.015,
-             "limits": [-1.5, 1.5], "velocity": 1.5, "effort": 6.0},
+            {"name": "j2_pitch", "origin": [0, 0, 0.30], "axis": [0, 1, 0], "radius": 0.04,
+             "limits": [-1.2, 1.2], "velocity": 0.8, "effort": 40.0},
+            {"name": "j3_roll", "origin": [0, 0, 0.18], "axis": [0, 0, 1], "radius": 0.035,
+             "limits": [-3.1, 3.1], "velocity": 1.2, "effort": 20.0},
+            {"name": "j4_pitch", "origin": [0, 0, 0.03], "axis": [0, 1, 0], "radius": 0.03,
+             "limits": [-2.6, 2.6], "velocity": 1.0, "effort": 20.0},
+            {"name": "j5_pitch", "origin": [0, 0, 0.15], "axis": [0, 1, 0], "radius": 0.022,
+             "limits": [-2.4, 2.4], "velocity": 1.2, "effort": 8.0},
         ],
-        "tip": {"offset": [0, 0, 0.08], "radius": 0.02},
+        "tip": {"offset": [0, 0, 0.12], "radius": 0.025},
     },
 }
 

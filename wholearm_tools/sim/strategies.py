@@ -209,3 +209,154 @@ class NoveltyStrategy(Strategy):
         scores += self.rng.uniform(0.0, 0.5, size=scores.shape)  # seeded tie break
         return cand[ok[int(np.argmax(scores))]]
 
+
+
+@register
+class FrontierStrategy(NoveltyStrategy):
+    """Frontier exploration in the workspace, from the robot's own swept map only.
+
+    Every move is one of:
+
+    * **return home** every ``home_every`` moves (a guarded move back to the start
+      configuration: unfolds an arm hooked around an obstacle);
+    * **directed** (probability ``directed``): pick a few *frontier* cells of the swept grid
+      (neither swept nor already tried, next to a swept cell) and, for each, solve a damped
+      least-squares IK step that carries a probe point of the arm (the tip with probability
+      ``tip_probe``, else a random inner joint) to ``overshoot`` metres beyond the cell, moving
+      the probe at most ``probe_step`` metres; probing inner joints is what produces link
+      contacts;
+    * **single-joint** (probability ``single_joint``): one joint changed to a uniform value;
+    * otherwise a uniform random target, as :class:`NoveltyStrategy`.
+
+    In each family the candidate whose straight joint-space path visits the most unexplored
+    cells wins (seeded tie break).  Nothing here reads the environment: frontier cells come from
+    the swept map and the blocked moves (``observe``), i.e. the robot's own motion history.
+    """
+
+    name = "frontier"
+
+    def __init__(self, *args: Any, home_every: int = 8, directed: float = 0.5,
+                 single_joint: float = 0.2, tip_probe: float = 0.6, probe_step: float = 0.3,
+                 overshoot: float = 0.05, goals: int = 6, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.home_every = int(home_every)
+        self.directed = float(directed)
+        self.single_joint = float(single_joint)
+        self.tip_probe = float(tip_probe)
+        self.probe_step = float(probe_step)
+        self.overshoot = float(overshoot)
+        self.goals = int(goals)
+        self.home: FloatArray | None = None
+        self.count = 0
+        self.touched: list[FloatArray] = []  # tip positions where moves were blocked
+        g = self.grid
+        idx = np.indices(g.shape).reshape(g.dim, -1).T
+        centres = g.origin + (idx + 0.5) * g.cell
+        base = self.robot.joint_positions(np.zeros(self.robot.dof))[0, : g.dim]
+        self._centres = centres
+        self._in_reach = (np.linalg.norm(centres - base, axis=1)
+                          <= 0.95 * self.robot.reach).reshape(g.shape)
+
+    def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:
+        super().observe(swept, attempted)
+        if attempted is not None and len(attempted):
+            # the arm was blocked at attempted[0]: remember where its tip was, and count the
+            # cells around it as tried (most blocks are tip contacts)
+            g = self.grid
+            tip = self.robot.joint_positions(attempted[0])[-1, : g.dim]
+            self.touched.append(tip)
+            offs = np.stack(np.meshgrid(*[np.array([-1.0, 0.0, 1.0])] * g.dim,
+                                        indexing="ij"), -1).reshape(-1, g.dim)
+            g.attempted.flat[g.cells(tip + offs * g.cell)] = True
+
+    # ------------------------------------------------------------------ helpers
+    def frontier(self) -> NDArray[np.int64]:
+        """Flat indices of the frontier cells (unknown, within reach, next to a swept cell)."""
+        g = self.grid
+        swept = g.swept
+        near = np.zeros_like(swept)
+        for ax in range(g.dim):
+            for sh in (1, -1):
+                near |= np.roll(swept, sh, axis=ax)
+        unknown = ~(swept | g.attempted) & self._in_reach
+        return np.flatnonzero(near & unknown)
+
+    def _ik(self, q: FloatArray, probe: int, goal: FloatArray) -> FloatArray:
+        """Damped least-squares steps moving point ``probe`` (joint index, ``dof`` = tip) of
+        the arm toward ``goal``, at most ``probe_step`` metres in all."""
+        robot, dim = self.robot, self.grid.dim
+        p0 = robot.joint_positions(q)[probe, :dim]
+        d = goal - p0
+        dist = float(np.linalg.norm(d))
+        if dist > self.probe_step:
+            goal = p0 + d * (self.probe_step / dist)
+        x = q.copy()
+        for _ in range(8):
+            pts = robot.joint_positions(x)
+            axes = robot.joint_axes(x)
+            p = pts[probe]
+            err = goal - p[:dim]
+            if np.linalg.norm(err) < 1e-3:
+                break
+            Jm = np.cross(axes, p - pts[:-1])[:, :dim].T  # (dim, n)
+            Jm[:, probe:] = 0.0
+            lam = 0.05
+            dx = Jm.T @ np.linalg.solve(Jm @ Jm.T + lam**2 * np.eye(dim), err)
+            x = np.clip(x + dx, self.lower, self.upper)
+        return x
+
+    def _best(self, q: FloatArray, cand: FloatArray) -> FloatArray | None:
+        ok = np.flatnonzero(self.acceptable(q, cand))
+        if ok.size == 0:
+            return None
+        fr = np.linspace(0.0, 1.0, self.path_samples)[1:, None]
+        scores = np.array([self.grid.novelty(q + fr * (c - q)) for c in cand[ok]], dtype=float)
+        scores += self.rng.uniform(0.0, 0.5, size=scores.shape)
+        return cand[ok[int(np.argmax(scores))]]
+
+    # ------------------------------------------------------------------ strategy
+    def next_target(self, q: FloatArray) -> FloatArray | None:
+        if self.home is None:
+            self.home = q.copy()
+        self.count += 1
+        if (self.home_every > 0 and self.count % self.home_every == 0
+                and np.linalg.norm(q - self.home) >= self.min_step):
+            return self.home.copy()
+        r = self.rng.random()
+        n = self.robot.dof
+        if r < self.directed:
+            front = self.frontier()
+            if front.size:
+                g = self.grid
+                pick = self.rng.choice(front, size=min(self.goals * 8, front.size),
+                                       replace=False)
+                if self.touched:
+                    # prefer goals far from where the arm was already blocked
+                    T = np.array(self.touched)
+                    far = np.min(np.linalg.norm(self._centres[pick][:, None] - T[None],
+                                                axis=2), axis=1)
+                    far += self.rng.uniform(0.0, g.cell, size=far.shape)
+                    pick = pick[np.argsort(-far)[: self.goals]]
+                else:
+                    pick = pick[: self.goals]
+                cand = []
+                for cell in pick:
+                    probe = n if self.rng.random() < self.tip_probe else int(
+                        self.rng.integers(max(1, n // 2), n))
+                    goal = self._centres[cell]
+                    p = self.robot.joint_positions(q)[probe, : g.dim]
+                    d = goal - p
+                    goal = goal + self.overshoot * d / max(float(np.linalg.norm(d)), 1e-9)
+                    cand.append(self._ik(q, probe, goal))
+                best = self._best(q, np.array(cand))
+                if best is not None:
+                    return best
+        elif r < self.directed + self.single_joint:
+            cand = np.repeat(q[None], self.candidates, axis=0)
+            joints = self.rng.integers(0, n, size=self.candidates)
+            vals = self.uniform(self.candidates, q)
+            cand[np.arange(self.candidates), joints] = vals[np.arange(self.candidates), joints]
+            best = self._best(q, cand)
+            if best is not None:
+                return best
+        return super().next_target(q)
