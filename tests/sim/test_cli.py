@@ -19,7 +19,7 @@ def test_scenarios_json() -> None:
     res = run("scenarios", "--json")
     assert res.exit_code == 0, res.output
     rows = {r["name"]: r for r in json.loads(res.output)}
-    assert rows["well_junction"]["dof"] == 6
+    assert rows["well_junction"]["dof"] == 5
     assert rows["lab_circle"]["planar"] is True
     assert rows["paper_planar"]["surfaces"].count("line") == 4
 
