@@ -106,14 +106,73 @@ def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> N
     return np.concatenate([a, mid, b], axis=1).reshape(-1, 3)[:, : robot.dim]
 
 
-def fit_data_from_table(table: ContactTable, free_points: NDArray | None = None) -> Any:
-    """The fitter's input (tips first, then links) and the table row of each fit contact."""
+#: smallest geometric noise level assumed for contacts [m] when the log gives none
+DEFAULT_NOISE_FLOOR = 1e-5
+
+
+def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
+    """Geometric resolution of a contact from the log's encoder noise [m].
+
+    Per joint, the white-noise scale of the measured positions is the MAD of their second
+    differences (smooth motion cancels at the log rate; quantisation counts as noise) divided
+    by ``sqrt(6)``; a point at the robot's reach moves by ``reach * sqrt(sum sigma_j^2)``.
+    Floored at :data:`DEFAULT_NOISE_FLOOR` / 10.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or len(q) < 5:
+        return DEFAULT_NOISE_FLOOR
+    d2 = np.diff(q, n=2, axis=0)
+    sig = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6.0)
+    # a quantised signal at rest has zero MAD: count one quantum step as the noise then
+    steps = np.abs(np.diff(q, axis=0))
+    quantum = np.array([np.min(c[c > 0]) if np.any(c > 0) else 0.0 for c in steps.T])
+    sig = np.maximum(sig, quantum / np.sqrt(12.0))
+    return float(max(float(robot.reach) * float(np.sqrt(np.sum(sig * sig))),
+                     DEFAULT_NOISE_FLOOR / 10))
+
+
+def duplicate_groups(table: ContactTable, tol: float) -> NDArray[np.int64]:
+    """Group id of each contact: contacts made on the same link, used the same way, in the same
+    configuration (tip centre and link axis within ``tol`` metres) share a group, ``(M,) int``.
+
+    Exploration strategies return to the same configuration again and again (a joint limit, a
+    retreat pose); counted separately, such repeats would outvote everything else in the fits
+    and in model selection although they carry the information of one contact.
+    """
+    m = len(table)
+    group = np.full(m, -1, dtype=np.int64)
+    key = np.hstack([table.tip_center, table.seg_a, table.seg_b])
+    g = 0
+    for i in range(m):
+        if group[i] >= 0:
+            continue
+        same = ((group < 0) & (table.link == table.link[i])
+                & (table.used_as_tip == table.used_as_tip[i])
+                & (np.max(np.abs(key - key[i]), axis=1) <= tol))
+        group[same] = g
+        g += 1
+    return group
+
+
+def fit_data_from_table(table: ContactTable, free_points: NDArray | None = None,
+                        rows: NDArray | None = None) -> Any:
+    """The fitter's input (tips first, then links) and the table row of each fit contact.
+
+    ``rows`` restricts the fit to these table rows (e.g. one per group of duplicates).
+    """
     from wholearm_tools.fit import FitData
 
-    tips = np.flatnonzero(table.used_as_tip)
-    links = np.flatnonzero(~table.used_as_tip)
+    use = np.zeros(len(table), dtype=bool)
+    use[np.arange(len(table)) if rows is None else np.asarray(rows, dtype=int)] = True
+    tips = np.flatnonzero(table.used_as_tip & use)
+    links = np.flatnonzero(~table.used_as_tip & use)
+    from wholearm_tools.fit.data import MIN_WEIGHT
+
+    # 1/sigma^2 from the classification, relative to the best contact and floored so that
+    # ambiguous contacts still count a little (the robust loss and the segmentation's residual
+    # test take care of wrongly labelled ones)
     weight = 1.0 / table.variance
-    weight = weight / weight.max() if len(weight) else weight
+    weight = np.maximum(weight / weight.max(), MIN_WEIGHT) if len(weight) else weight
     data = FitData.create(
         tip_points=table.tip_center[tips], tip_radius=table.tip_radius[tips],
         tip_weight=weight[tips], link_a=table.seg_a[links], link_b=table.seg_b[links],
@@ -126,22 +185,56 @@ def fit_data_from_table(table: ContactTable, free_points: NDArray | None = None)
 def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None = None,
               loss: str = "huber", noise: float | None = None,
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
+              noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
-    """Fit-and-grow over a contact table → (map, fits, table with assignments, messages)."""
+    """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
+
+    Repeated contacts (same link, same configuration within ``3 * noise_floor``) are fitted
+    once (see :func:`duplicate_groups`) and share the assignment of their representative.
+    Poor data never raise: the map is then empty (or short) and ``messages`` say why.
+    """
     from wholearm_tools.fit import fit_primitive, segment
+    from wholearm_tools.fit.models import MODELS
     from wholearm_tools.mesh import support_extent
 
     dim = 2 if planar else 3
     if table.dim != dim:
         raise InputError(f"contacts are {table.dim}-D but the map is {dim}-D")
-    kinds = kinds or KINDS_BY_DIM[dim]
-    data, order = fit_data_from_table(table, free_points)
-    seg = segment(data, kinds=kinds, noise=noise)
+    kinds = tuple(kinds or KINDS_BY_DIM[dim])
+    bad = [k for k in kinds if k not in MODELS or MODELS[k].dim != dim]
+    if bad:
+        raise InputError(f"primitive type(s) {', '.join(map(repr, bad))} cannot be fitted to "
+                         f"{dim}-D contacts (choose from {', '.join(KINDS_BY_DIM[dim])})")
+    messages: list[str] = []
+    m_all = len(table)
+    group = (duplicate_groups(table, 3.0 * noise_floor) if merge_duplicates
+             else np.arange(m_all))
+    _, first = np.unique(group, return_index=True)
+    reps = np.sort(first)
+    if len(reps) < m_all:
+        messages.append(f"{m_all - len(reps)} repeated contacts (same configuration) counted "
+                        f"once: {len(reps)} distinct of {m_all}")
+    data, order = fit_data_from_table(table, free_points, rows=reps)
+    need = min(MODELS[k].dof for k in kinds) + 3
+    seg = segment(data, kinds=kinds, noise=noise, noise_floor=noise_floor,
+                  min_radius=0.5 * float(B))
+    if data.n_contacts < need:
+        messages.append(f"too few distinct contacts to fit a primitive: {data.n_contacts} "
+                        f"given, at least {need} needed (a {kinds[0]} has "
+                        f"{MODELS[kinds[0]].dof} parameters and is checked on 3 more)")
+    elif not seg.primitives:
+        pts = data.contact_points()
+        s = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
+        if s[0] <= 0 or np.sum(s > 1e-6 * s[0]) < dim - 1:
+            messages.append("all contacts are collinear or coincide: no primitive is "
+                            "determined by them")
+        else:
+            messages.append("no primitive both explains enough contacts and is determined by "
+                            "them (supports too small, degenerate or not converging)")
     assignment = np.full(len(table), -1, dtype=np.int64)
     residual = np.full(len(table), np.nan)
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
-    messages: list[str] = []
     n_tip = data.n_tip
     for k, fit in enumerate(seg.primitives):
         members = seg.members(k)  # sorted: tips first, then links
@@ -157,8 +250,11 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                                 "kept the least-squares fit")
         pid = len(primitives)
         rows = order[members]
-        assignment[rows] = pid
-        residual[rows] = fit.residuals
+        # duplicates follow their representative
+        dup = np.isin(group, group[rows])
+        res_of_group = dict(zip(group[rows].tolist(), fit.residuals.tolist(), strict=True))
+        assignment[dup] = pid
+        residual[dup] = [res_of_group[g] for g in group[dup].tolist()]
         extent = support_extent(fit.kind, fit.params, _support_points(fit, data, members, n_tip))
         ci95 = {k: (np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)) / 2
                 for k, (lo, hi) in fit.ci95.items()}
@@ -166,16 +262,19 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
             id=pid, kind=fit.kind, params=dict(fit.params), ci95=ci95,
             covariance=np.asarray(fit.covariance if fit.covariance is not None else
                                   np.zeros((0, 0))),
-            support={"tip": int(np.sum(members < n_tip)), "link": int(np.sum(members >= n_tip))},
+            support={"tip": int(np.sum(table.used_as_tip[dup])),
+                     "link": int(np.sum(~table.used_as_tip[dup]))},
             rms_residual=float(fit.rms_residual), extent=extent,
         ))
         fits.append(fit)
+    if seg.primitives and not primitives:
+        messages.append("no primitive could be fitted")
     unexplained_rows = np.flatnonzero(assignment < 0)
     unexplained = table.tip_center[unexplained_rows[table.used_as_tip[unexplained_rows]]]
     counts = {"count": len(table), "tip": int(np.sum(table.label == "tip")),
               "link": int(np.sum(table.label == "link")),
               "ambiguous": int(np.sum(table.label == "ambiguous")),
-              "unexplained": int(len(unexplained_rows))}
+              "unexplained": len(unexplained_rows)}
     surface_map = SurfaceMap(planar=planar, B=float(B), primitives=tuple(primitives),
                              contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
     table = table.with_assignment(assignment, residual)
@@ -225,6 +324,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
     table = contact_table(run.robot, contacts, classification)
     clock = time.perf_counter()
     hints = free_space_hints(run.robot, np.asarray(run.log.q), params.free_hints)
+    floor = position_noise_floor(run.robot, np.asarray(run.log.q))
     meta = {"source": run.source, "causal": params.causal, "duration": run.log.duration}
     if len(table) == 0:
         surface_map = SurfaceMap(planar=run.robot.planar, B=params.B, primitives=(),
@@ -235,7 +335,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
     else:
         surface_map, fits, table, messages = fit_table(
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
-            noise=params.noise, free_points=hints, meta=meta)
+            noise=params.noise, free_points=hints, meta=meta, noise_floor=floor)
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

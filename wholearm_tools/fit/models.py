@@ -242,12 +242,24 @@ def _line_params(th: FloatArray) -> dict[str, Any]:
 
 
 def _hyperplane_init(ctx: InitContext) -> list[FloatArray]:
-    _, _, vt = pca(ctx.all_points)
-    n = vt[-1]
-    # offset so that the contact centres sit at +w on the free side
-    surf = ctx.surface_points
-    c0 = float(np.mean(surf @ n - ctx.side * ctx.offsets))
-    return [np.concatenate([n, [c0]])]
+    """PCA normals of several point sets: a link touches a line or plane at one of its end
+    points, so the tips with the outer link ends, with the inner ends, with the midpoints, and
+    all points are tried (the fit keeps the best start)."""
+    sets = [ctx.all_points]
+    if len(ctx.a):
+        sets = [np.vstack([ctx.tip, ctx.b]), np.vstack([ctx.tip, ctx.a]),
+                ctx.surface_points, ctx.all_points]
+    out = []
+    for pts in sets:
+        if len(pts) < ctx.tip.shape[1]:
+            continue
+        _, _, vt = pca(pts)
+        n = vt[-1]
+        # offset so that the contact centres sit at +w on the free side
+        c0 = float(np.mean(pts[: len(ctx.tip)] @ n - ctx.side * ctx.tip_w)) if len(ctx.tip) \
+            else float(np.mean(pts @ n))
+        out.append(np.concatenate([n, [c0]]))
+    return out
 
 
 _register(Model(
@@ -256,7 +268,7 @@ _register(Model(
     sd=_line_sd, eq=_unit_constraint(0, 2), ineq=_no_constraints,
     to_params=_line_params,
     params=(ParamSpec("point", 2, "point"), ParamSpec("direction", 2, "direction")),
-    init=_hyperplane_init, min_rank=1, linear=True,
+    init=_hyperplane_init, min_rank=1, linear=True, starts=2,
 ))
 
 
@@ -322,7 +334,7 @@ _register(Model(
     sd=_plane_sd, eq=_unit_constraint(0, 3), ineq=_no_constraints,
     to_params=_plane_params,
     params=(ParamSpec("point", 3, "point"), ParamSpec("normal", 3, "direction")),
-    init=_hyperplane_init, min_rank=2, linear=True,
+    init=_hyperplane_init, min_rank=2, linear=True, starts=2,
 ))
 
 

@@ -53,6 +53,15 @@ class FitResult:
         Root mean square of all residuals (unweighted, metres).
     primitive : geometry object or None
         The fitted :class:`wholearm_tools.geometry.Primitive` (None when the fit failed).
+    sensitivity : float
+        Identifiability [1/m]: the standard deviation of the worst-determined combination of the
+        parameters (lengths in units of :attr:`scale`, unit vectors and angles as they are), per
+        metre of residual noise, from the unweighted-loss Gauss-Newton information
+        ``(J^T W J)^-1`` on the minimal parameterisation.  ``noise * sensitivity`` well below 1
+        means the support constrains every degree of freedom; ``inf`` when some combination is
+        not constrained at all (e.g. link contacts that all touch at one common point).
+    scale : float
+        RMS spread of the support about its centroid [m] (the normalisation length).
     """
 
     kind: str
@@ -71,6 +80,8 @@ class FitResult:
     link_t: FloatArray = field(default_factory=lambda: np.zeros(0))
     rms_residual: float = float("nan")
     primitive: Any = None
+    sensitivity: float = float("inf")
+    scale: float = float("nan")
 
     def __bool__(self) -> bool:
         return bool(self.success)

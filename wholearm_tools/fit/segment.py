@@ -1,27 +1,38 @@
 """Fit-and-grow segmentation (Leonardis, Gupta & Bajcsy 1995) of tip and link contacts.
 
 1. **Seeds**: up to ``max_seeds`` seed contacts spread by farthest-point sampling (the first one
-   drawn with ``rng``); each seed region is the seed's ``seed_size`` nearest contacts (link
+   drawn with ``rng``); each seed region is the seed's ``dof + 2`` nearest contacts for each
+   type (small, so that a seed rarely straddles two surfaces) (link
    contacts are placed at their segment midpoints for neighbourhood purposes only; their
    residuals are always the true link residuals).
 2. **Seed fits**: every allowed type (cheap ones first) is fitted to every seed region; a type is
    kept for a seed when its dof-corrected RMS residual is below ``seed_accept * sigma``.
-3. **Noise level** ``sigma``: given, or the lower quartile of the best dof-corrected seed RMS
-   residuals (seeds that straddle two surfaces fit badly, those inside one fit at the noise
-   level), floored at ``1e-6`` of the scene size.
+3. **Noise level** ``sigma``: given, or the 10th percentile of the best dof-corrected seed RMS
+   residuals divided by its expected value 0.325 sigma (seeds that straddle two surfaces fit
+   badly, those inside one fit at the noise level), floored at ``noise_floor`` (the pipeline
+   derives it from the encoder noise) and at ``1e-6`` of the scene size.
 4. **Growth**: a hypothesis absorbs every contact connected to it (k-nearest-neighbour graph)
-   through contacts whose weighted residual is within ``k_sigma * sigma``; it is refitted (warm
+   through contacts whose residual is within ``k_sigma * sigma``; it is refitted (warm
    start) and grown again until its support stops changing; a refit whose RMS exceeds
    ``1.5 sigma`` (``sqrt(chi2)`` level) stops the growth.
 5. **Selection** by description length (in nats): a contact left unexplained costs
    ``log(extent / sigma)`` (its position coded at the noise precision), an explained one
-   ``z^2 / 2`` (``z`` = weighted residual / sigma) and a primitive ``dof / 2 * log(N)`` (BIC).
+   ``z^2 / 2`` (``z`` = residual / sigma) and a primitive ``dof / 2 * log(N)`` (BIC).
    Hypotheses are selected greedily by their saving in description length given those already
    selected, until no saving is positive, so a plane beats a huge sphere on planar data (same
    residuals, fewer parameters) and a second primitive on the same surface saves nothing.
-6. **Assignment**: every contact goes to the selected primitive with the smallest residual within
-   ``k_sigma * sigma``; each primitive is refitted on its contacts; contacts explained by none
-   are unexplained (``-1``).
+   Only **admissible** hypotheses take part: radii within ``[min_radius, max_radius_ratio x
+   support spread]`` (a circle shrinking onto the point where all its link contacts meet, or a
+   huge sphere that is really a plane, is not a primitive) and a support that constrains every
+   degree of freedom: the standard deviation of the worst-determined parameter combination
+   (:attr:`FitResult.sensitivity` x ``sigma``, in units of the support's spread) must stay below
+   ``max_rel_std`` (at noise ``max(sigma, 1e-4 x scene size)``).  Link contacts that all touch
+   at one point (every contact of the first link starts at the base), or tangent lines from one
+   point to a circle, leave a direction free and are rejected here.
+6. **Assignment**: sigma is re-estimated (raised only) from the residuals the selected
+   primitives explain (1.4826 x MAD); every contact goes to the selected primitive with the
+   smallest residual within ``k_sigma * sigma``; each primitive is refitted on its contacts;
+   contacts explained by none are unexplained (``-1``).
 """
 
 from __future__ import annotations
@@ -36,6 +47,10 @@ from wholearm_tools.fit.core import fit_primitive, residuals
 from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.result import FitResult
+
+#: radius-like parameters checked against ``min_radius`` / ``max_radius_ratio``
+RADII = {"circle": ("radius",), "sphere": ("radius",), "cylinder": ("radius",),
+         "torus": ("minor_radius", "major_radius")}
 
 #: default candidate types per dimension, cheapest first
 DEFAULT_KINDS = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
@@ -114,6 +129,10 @@ def segment(
     min_support: int | None = None,
     seed_accept: float = 2.5,
     seed_max_iter: int = 60,
+    noise_floor: float = 0.0,
+    min_radius: float = 0.0,
+    max_radius_ratio: float = 50.0,
+    max_rel_std: float = 0.2,
     rng: int | np.random.Generator | None = 0,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
@@ -128,16 +147,28 @@ def segment(
     noise : float or None
         Residual noise level sigma (metres); None estimates it from the seed fits.
     k_sigma : float
-        Growth/assignment threshold in units of sigma (on weighted residuals, weights scaled
-        to a maximum of 1, so ambiguous contacts are tolerated further).
+        Growth/assignment threshold in units of sigma, on the residuals themselves: a contact
+        is explained or it is not, whatever its classification weight (the weights act in the
+        fits; inflating the tolerance of uncertain contacts let whole other surfaces in).
     seed_size : int or None
-        Contacts per seed region; default ``max dof + 3`` (5 in 2-D, 10 in 3-D).
+        Contacts per seed region; default ``dof + 2`` of each type.
     max_seeds : int
         Number of seed regions.
     neighbours : int
         Neighbours per contact in the adjacency graph used for growth.
     min_support : int or None
-        Fewest contacts a reported primitive may have; default ``dof + 3`` of its type.
+        Fewest contacts a reported primitive may have; default ``dof + 2`` of its type (two
+        redundant contacts; description length decides beyond that).
+    noise_floor : float
+        Smallest noise level (metres) the estimate may take (measurement resolution).
+    min_radius : float
+        Smallest admissible radius (metres) of circles, spheres, cylinders and tori (the
+        pipeline passes ``B / 2``: B is the smallest expected curvature radius).
+    max_radius_ratio : float
+        Largest admissible radius in units of the support's RMS spread.
+    max_rel_std : float
+        Largest standard deviation of the worst-determined parameter combination, in units of
+        the support's spread, at noise ``max(sigma, 1e-4 x scene size)``.
     rng : seed or Generator
         Picks the first seed; the result is deterministic for a given seed.
 
@@ -157,17 +188,14 @@ def segment(
         raise InputError(f"noise must be positive, got {noise!r}")
     rng = np.random.default_rng(rng)
     n = data.n_contacts
-    dof_max = max(MODELS[k].dof for k in kinds)
-    seed_size = int(seed_size or dof_max + 3)
+    seed_sizes = {k: int(seed_size or MODELS[k].dof + 2) for k in kinds}
     empty = Segmentation((), np.full(n, -1), float(noise or 0.0), 0.0)
-    if n < seed_size:
+    if n < min(seed_sizes.values()):
         return empty
 
     X = data.contact_points()
     allpts = np.vstack([data.tip_points, data.link_a, data.link_b])
     extent = float(np.linalg.norm(allpts.max(axis=0) - allpts.min(axis=0)))
-    W = np.concatenate([data.tip_weight, data.link_weight])
-    sw = np.sqrt(W / W.max())
     D = np.linalg.norm(X[:, None, :] - X[None, :, :], axis=2)
     order = np.argsort(D, axis=1)
     adj = np.zeros((n, n), dtype=bool)
@@ -176,27 +204,45 @@ def segment(
     adj |= adj.T
 
     def min_sup(kind: str) -> int:
-        return int(min_support or MODELS[kind].dof + 3)
+        return int(min_support or MODELS[kind].dof + 2)
 
     # ---- seed fits
     seeds = _farthest_points(X, max_seeds, rng)
-    seed_fits: list[tuple[np.ndarray, list[FitResult]]] = []
+    seed_fits: list[list[tuple[np.ndarray, FitResult]]] = []
     for s in seeds:
-        members = np.sort(order[s, :seed_size])
-        sub = data.take(members)
-        fits = [fit_primitive(k, sub, max_iter=seed_max_iter) for k in kinds]
-        seed_fits.append((members, fits))
+        fits = []
+        for k in kinds:
+            members = np.sort(order[s, :seed_sizes[k]])
+            fits.append((members, fit_primitive(k, data.take(members), max_iter=seed_max_iter)
+                         if len(members) > MODELS[k].dof else
+                         fit_primitive(k, data.take(members[:0]))))
+        seed_fits.append(fits)
 
     if noise is None:
-        best = [min((_rms_dof(f) for f in fits if f), default=np.inf) for _, fits in seed_fits]
+        best = [min((_rms_dof(f) for _, f in fits if f), default=np.inf) for fits in seed_fits]
         finite = np.array([b for b in best if np.isfinite(b)])
-        est = float(np.median(finite)) if finite.size else 0.0
-        sigma = max(est, 1e-6 * extent)
+        # seeds have dof + 2 contacts: the dof-corrected RMS of a seed inside one surface is
+        # sigma * sqrt(chi2_2 / 2), whose 10th percentile is sqrt(-ln 0.9) = 0.325 sigma (a low
+        # quantile: in sparse scenes most seeds straddle two surfaces)
+        q = 0.325 if seed_size is None else 1.0
+        est = float(np.percentile(finite, 10)) / q if finite.size else 0.0
+        sigma = max(est, float(noise_floor), 1e-6 * extent)
     else:
         sigma = float(noise)
+    sigma_id = max(sigma, 1e-4 * extent)
+
+    def admissible(fit: FitResult) -> bool:
+        """Radii in range and every degree of freedom constrained by the support."""
+        if not fit:
+            return False
+        for name in RADII.get(fit.kind, ()):
+            r = float(fit.params[name])
+            if r < min_radius or r > max_radius_ratio * fit.scale:
+                return False
+        return fit.sensitivity * sigma_id <= max_rel_std
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
-        return sw * residuals(kind, fit.params, data, fit.free_side) / sigma
+        return residuals(kind, fit.params, data, fit.free_side) / sigma
 
     def grow(kind: str, fit: FitResult, members: np.ndarray) -> _Hyp | None:
         for _ in range(25):
@@ -218,7 +264,7 @@ def segment(
             if not refit or _rms_dof(refit) > 2.0 * sigma:
                 break
             fit, members = refit, new
-        if members.size < min_sup(kind):
+        if members.size < min_sup(kind) or not admissible(fit):
             return None
         return _Hyp(kind, fit, members)
 
@@ -226,10 +272,10 @@ def segment(
     hyps: list[_Hyp] = []
     seen: set[tuple[str, bytes]] = set()
     covered = np.zeros(n, dtype=bool)
-    for s, (members, fits) in zip(seeds, seed_fits, strict=True):
+    for s, fits in zip(seeds, seed_fits, strict=True):
         if covered[s]:
             continue
-        for kind, f in zip(kinds, fits, strict=True):
+        for kind, (members, f) in zip(kinds, fits, strict=True):
             if not f or _rms_dof(f) > seed_accept * sigma:
                 continue
             h = grow(kind, f, members)
@@ -285,7 +331,7 @@ def segment(
             if MODELS[k].dof >= MODELS[h.kind].dof:
                 continue
             f = refit_on(k, h.members, None)
-            if f and (d_ := dl(k, f, h.members)) <= best_dl:
+            if admissible(f) and (d_ := dl(k, f, h.members)) <= best_dl:
                 best, best_dl = _Hyp(k, f, h.members), d_
         return best
 
@@ -301,7 +347,7 @@ def segment(
                 for k in dict.fromkeys(sorted((hi_.kind, hj.kind), key=lambda k: MODELS[k].dof)):
                     prev = hi_.fit if hi_.kind == k else hj.fit
                     f = refit_on(k, union, prev)
-                    if f and dl(k, f, union) < base:
+                    if admissible(f) and dl(k, f, union) < base:
                         final = [h for m_, h in enumerate(final) if m_ not in (i, j)]
                         final.append(_Hyp(k, f, union))
                         merged = True
@@ -311,6 +357,12 @@ def segment(
             if merged:
                 break
 
+    if noise is None and final:
+        # second look at the noise level: the residuals of the contacts the selected primitives
+        # explain (the seed estimate is biased low: best of several types on tiny seeds)
+        r = np.concatenate([residuals(h.kind, h.fit.params, data, h.fit.free_side)[h.members]
+                            for h in final])
+        sigma = max(sigma, 1.4826 * float(np.median(np.abs(r))))
     assignment = np.full(n, -1)
     for _ in range(2):
         if not final:
@@ -325,7 +377,10 @@ def segment(
             if idx.size < min_sup(h.kind):
                 continue
             refit = refit_on(h.kind, idx, h.fit)
-            kept.append(_Hyp(h.kind, refit if refit else h.fit, idx))
+            if admissible(refit):
+                kept.append(_Hyp(h.kind, refit, idx))
+            elif admissible(h.fit):
+                kept.append(_Hyp(h.kind, h.fit, idx))
         final = kept
     if final:
         Z = np.stack([np.abs(zres(h.kind, h.fit)) for h in final])
