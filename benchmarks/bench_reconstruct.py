@@ -1,0 +1,176 @@
+"""Reconstruction accuracy and speed on the bundled scenarios, and the value of link data.
+
+For each scenario and seed: simulate (the scenario's duration), ``reconstruct`` (detect →
+classify → fit-and-grow), score against the ground truth with
+:func:`wholearm_tools.report.metrics.evaluate` (primitives matched to true surfaces by the true
+surfaces their member contacts touched), then refit the same classified contacts with the tip
+contacts only (``used_as_tip``) and score again: the paper's claim is that tip + link beats tip
+alone.
+
+Columns: ``true`` = true surfaces; ``touched`` = surfaces with at least one true contact;
+``dof-cov`` = touched surfaces whose distinct contacts consistent with them as used (true
+surface residual < 1 mm) reach the type's ``dof + 2`` (what fit-and-grow needs to report a
+primitive: below it the simulator's coverage is the limit, not the fit); ``found`` = touched
+surfaces matched by a primitive of the right type; ``extra`` = primitives matched to no
+surface or of the wrong type; ``size %`` =
+radius (major radius) error in percent per found curved surface; ``angle`` = axis / normal angle
+error in degrees; ``srms`` = RMS distance of the fitted surface, sampled over its extent, to the
+true surface [mm].  Times are wall seconds of ``reconstruct`` (detect / classify / fit).
+
+Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0,1] [--scenarios a,b]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+import warnings
+
+import numpy as np
+
+from wholearm_tools.contact_table import ContactTable
+from wholearm_tools.contacts import match_truth
+from wholearm_tools.fit.models import MODELS
+from wholearm_tools.pipeline import Reconstruction, fit_table, position_noise_floor, reconstruct
+from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_surfaces
+from wholearm_tools.sim.scenarios import load_scenario
+
+SCENARIOS = ("lab_circle", "paper_planar", "paper_spatial", "well_junction")
+
+
+def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
+    """The contact table restricted to ``rows``."""
+    vals = {f.name: np.asarray(getattr(table, f.name))[rows]
+            for f in dataclasses.fields(table)}
+    return ContactTable(**vals)
+
+
+def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
+    """Distinct detected contacts per true surface (position index) that are consistent with it
+    as the fit uses them (tip or link residual of the true surface below ``tol`` metres)."""
+    from wholearm_tools.fit import residuals
+    from wholearm_tools.pipeline import fit_data_from_table
+
+    truth = rec.run.truth
+    surfaces = true_surfaces(truth)
+    cs = truth_contact_surfaces(truth, surfaces)
+    mi = match_truth(rec.contacts, truth)
+    table = rec.table
+    surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
+    out: dict[int, int] = {}
+    for i, s in enumerate(surfaces):
+        rows = np.flatnonzero(surf == i)
+        if len(rows) == 0:
+            out[i] = 0
+            continue
+        data, order = fit_data_from_table(table, rows=rows)
+        r = residuals(s.kind, s.params, data, float(s.data.get("free_side", 1)))
+        good = order[np.abs(r) < tol]
+        key = np.round(np.hstack([table.tip_center[good], table.seg_a[good]]) / 1e-4)
+        out[i] = len({tuple(k) for k in key.tolist()})
+    return out
+
+
+def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
+    ev = evaluate(rec)
+    surfaces = true_surfaces(rec.run.truth)
+    touched = [s for s in ev.surfaces if s.touched]
+    enough = [s for i, s in enumerate(ev.surfaces)
+              if cov[i] >= MODELS[surfaces[i].kind].dof + 2]
+    found = [s for s in ev.surfaces if s.touched and s.found]
+    good = [a for a in ev.primitives if a.type_correct]
+    return {
+        "true": len(ev.surfaces), "touched": len(touched), "dof_cov": len(enough),
+        "found": len(found), "found_kinds": sorted(s.kind for s in found),
+        "n_prims": len(ev.primitives),
+        "extra": sum(1 for a in ev.primitives if not a.type_correct)
+        + (len(good) - len({a.truth_id for a in good})),
+        "size_pct": [abs(a.size_error_pct) for a in good if a.size_error_pct is not None],
+        "angle": [a.axis_angle_deg for a in good if a.axis_angle_deg is not None],
+        "srms_mm": [1e3 * a.surface_rms for a in good if a.surface_rms is not None],
+        "coverage": {f"{surfaces[i].kind}{surfaces[i].id}": c for i, c in cov.items()},
+    }
+
+
+def tip_only(rec: Reconstruction) -> Reconstruction:
+    table = rec.table
+    rows = np.flatnonzero(np.asarray(table.used_as_tip))
+    sub = take_rows(table, rows)
+    floor = position_noise_floor(rec.run.robot, np.asarray(rec.run.log.q))
+    smap, fits, sub, msgs = fit_table(sub, planar=rec.planar, B=rec.params.B,
+                                      loss=rec.params.loss, noise_floor=floor)
+    return dataclasses.replace(rec, table=sub, fits=fits, surface_map=smap, messages=msgs)
+
+
+def _fmt(values: list[float], digits: int = 2) -> str:
+    if not values:
+        return "-"
+    return "max " + f"{max(values):.{digits}g}" + (f" (n={len(values)})" if len(values) > 1
+                                                     else "")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0,1")
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    args = ap.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    warnings.simplefilter("ignore")
+    rows = []
+    for name in args.scenarios.split(","):
+        sc = load_scenario(name)
+        B = float(sc.hints.get("B", 0.02))
+        for seed in seeds:
+            run = sc.simulate(seed=seed).run
+            t0 = time.perf_counter()
+            rec = reconstruct(run, B=B)
+            wall = time.perf_counter() - t0
+            cov = coverage(rec)
+            both = score(rec, cov)
+            t1 = time.perf_counter()
+            tip = score(tip_only(rec), cov)
+            t_tip = time.perf_counter() - t1
+            rows.append((name, seed, B, run.log.duration, len(rec.table), wall, rec.timings,
+                         both, tip, t_tip, rec.messages))
+            print(f"# {name} seed {seed}: {len(rec.table)} contacts, reconstruct {wall:.1f} s; "
+                  f"coverage (distinct correctly classified contacts per surface) "
+                  f"{both['coverage']}", flush=True)
+
+    print("\n## Primitives found (tip + link data)\n")
+    print(f"{'scenario':<14}{'seed':>4}{'arm s':>7}{'cont':>6}{'true':>5}{'touch':>6}"
+          f"{'dofcov':>7}{'found':>6}{'extra':>6}  {'found types':<34}{'size %':<16}"
+          f"{'angle deg':<18}{'srms mm':<16}")
+    for name, seed, _, dur, n, _, _, b, _, _, _ in rows:
+        print(f"{name:<14}{seed:>4}{dur:>7.0f}{n:>6}{b['true']:>5}{b['touched']:>6}"
+              f"{b['dof_cov']:>7}{b['found']:>6}{b['extra']:>6}  "
+              f"{','.join(b['found_kinds']):<34}{_fmt(b['size_pct']):<16}"
+              f"{_fmt(b['angle']):<18}{_fmt(b['srms_mm']):<16}")
+
+    print("\n## Value of link data: tip contacts only vs tip + link\n")
+    print(f"{'scenario':<14}{'seed':>4}  {'found tip|both':<15}{'extra tip|both':<15}"
+          f"{'size % tip | both':<34}{'angle deg tip | both':<36}{'srms mm tip | both':<30}")
+    for name, seed, _, _, _, _, _, b, t, _, _ in rows:
+        print(f"{name:<14}{seed:>4}  {t['found']:>3} | {b['found']:<8}{t['extra']:>3} | "
+              f"{b['extra']:<8}{_fmt(t['size_pct']):>15} | {_fmt(b['size_pct']):<16}"
+              f"{_fmt(t['angle']):>17} | {_fmt(b['angle']):<16}"
+              f"{_fmt(t['srms_mm']):>14} | {_fmt(b['srms_mm']):<14}")
+
+    print("\n## Time (wall s of reconstruct)\n")
+    print(f"{'scenario':<14}{'seed':>4}{'arm s':>7}{'total':>8}{'detect':>8}{'classify':>9}"
+          f"{'fit':>7}{'tip-only fit':>13}")
+    for name, seed, _, dur, _, wall, tm, _, _, t_tip, _ in rows:
+        print(f"{name:<14}{seed:>4}{dur:>7.0f}{wall:>8.1f}{tm.get('detect', 0):>8.2f}"
+              f"{tm.get('classify', 0):>9.2f}{tm.get('fit', 0):>7.2f}{t_tip:>13.2f}")
+    wj = [r for r in rows if r[0] == "well_junction"]
+    if wj:
+        worst = max(r[5] for r in wj)
+        print(f"\nwell_junction reconstruct: worst {worst:.1f} s wall for "
+              f"{wj[0][3]:.0f} s of arm time (target < 30 s)")
+    notes = {m for r in rows for m in r[10]}
+    if notes:
+        print("\nmessages: " + "; ".join(sorted(notes)))
+
+
+if __name__ == "__main__":
+    main()
