@@ -1,0 +1,48 @@
+"""Coverage of the bundled scenarios (ground-truth contacts per surface and their spread)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wholearm_tools.logs.records import GroundTruth
+from wholearm_tools.sim import load_scenario
+from wholearm_tools.sim.coverage import kind_counts, surface_coverage
+
+
+def test_spread_figures_on_a_synthetic_truth() -> None:
+    ang = np.radians([0.0, 90.0, 180.0])
+    pts = np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], axis=1) * 0.1
+    cyl = np.array([[0.1, 0.0, -0.2], [-0.1, 0.0, 0.3], [0.0, 0.1, 0.1]])
+    truth = GroundTruth(
+        surfaces=({"id": 0, "type": "circle", "params": {"center": [0, 0], "radius": 0.1}},
+                  {"id": 1, "type": "cylinder",
+                   "params": {"point": [0, 0, 0], "axis": [0, 0, 1], "radius": 0.1}},
+                  {"id": 2, "type": "line", "params": {"point": [0, 1], "direction": [1, 0]}}),
+        contact_t=np.arange(6.0), contact_link=np.zeros(6, dtype=np.int64),
+        contact_kind=np.array(["tip", "body", "joint", "tip", "tip", "body"]),
+        contact_point=np.vstack([pts, cyl]), contact_surface=np.array([0, 0, 0, 1, 1, 1]),
+        contact_s=np.ones(6))
+    circ, cy, line = surface_coverage(truth)
+    assert (circ.count, circ.tip, circ.joint, circ.body) == (3, 1, 1, 1)
+    assert circ.arc == pytest.approx(180.0)
+    assert cy.arc == pytest.approx(180.0)
+    assert cy.axial == pytest.approx((-0.2, 0.3))
+    assert (cy.above, cy.below) == (2, 1)
+    assert line.count == 0
+    assert line.spread() == "-"
+    assert kind_counts(truth) == {"tip": 3, "joint": 1, "body": 2}
+
+
+def test_well_junction_default_run_covers_main_bore_and_branch() -> None:
+    res = load_scenario("well_junction").simulate()
+    main, branch = surface_coverage(res.truth)
+    kinds = kind_counts(res.truth)
+    assert main.count >= 10
+    assert branch.count >= 10
+    assert main.arc is not None
+    assert main.arc >= 180
+    assert branch.arc is not None
+    assert branch.arc >= 180
+    assert kinds["body"] >= 1
+    assert kinds["tip"] >= 10
