@@ -9,9 +9,11 @@ from pathlib import Path
 import click
 
 from cli.options import (
+    causal_option,
     command_topic_option,
     joint_topic_option,
     json_option,
+    loss_option,
     overwrite_option,
     prepare_output_dir,
     robot_option,
@@ -29,9 +31,8 @@ from cli.options import (
               help="Dask scheduler address (tcp://host:port); default: local processes.")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Local worker processes (default: one per core, at most one per run).")
-@click.option("--causal", is_flag=True, help="Classify with the map as seen live.")
-@click.option("--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
-              show_default=True, help="Fit loss.")
+@causal_option
+@loss_option
 @robot_option
 @joint_topic_option
 @command_topic_option

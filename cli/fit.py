@@ -7,7 +7,13 @@ from pathlib import Path
 
 import click
 
-from cli.options import B_option, check_output_file, json_option, overwrite_option
+from cli.options import (
+    B_option,
+    check_output_file,
+    json_option,
+    loss_option,
+    overwrite_option,
+)
 
 
 @click.command("fit")
@@ -17,8 +23,7 @@ from cli.options import B_option, check_output_file, json_option, overwrite_opti
 @B_option()
 @click.option("--kind", "kinds", multiple=True,
               help="Primitive types to consider (repeatable; default: all for the dimension).")
-@click.option("--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
-              show_default=True)
+@loss_option
 @json_option
 @overwrite_option
 def command(contacts: Path, output: Path, B: float, kinds: tuple[str, ...], loss: str,

@@ -58,3 +58,9 @@ def prepare_output_dir(path: Path, names: list[str], overwrite: bool) -> None:
     except OSError as exc:
         raise click.ClickException(f"{path}: cannot create output folder ({exc.strerror})"
                                    ) from None
+causal_option = click.option(
+    "--causal", is_flag=True,
+    help="Classify with the swept map as the robot saw it at each contact (default: whole run).")
+loss_option = click.option(
+    "--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
+    show_default=True, help="Fit loss (robust losses resist misclassified contacts).")

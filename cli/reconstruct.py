@@ -9,16 +9,18 @@ import click
 
 from cli.options import (
     B_option,
+    causal_option,
     command_topic_option,
     joint_topic_option,
     json_option,
+    loss_option,
     overwrite_option,
     prepare_output_dir,
     robot_option,
 )
 
 
-def summary_lines(rec) -> list[str]:  # noqa: ANN001 - Reconstruction, imported lazily
+def summary_lines(rec) -> list[str]:
     """Human-readable summary of a reconstruction (also used by the demo)."""
     m = rec.surface_map
     c = m.contacts
@@ -42,9 +44,8 @@ def summary_lines(rec) -> list[str]:  # noqa: ANN001 - Reconstruction, imported 
 @B_option()
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (map.json, contacts.csv).")
-@click.option("--causal", is_flag=True, help="Classify with the map as seen live.")
-@click.option("--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
-              show_default=True, help="Fit loss (robust losses resist misclassified contacts).")
+@causal_option
+@loss_option
 @robot_option
 @joint_topic_option
 @command_topic_option
