@@ -46,3 +46,41 @@ def test_well_junction_default_run_covers_main_bore_and_branch() -> None:
     assert branch.arc >= 180
     assert kinds["body"] >= 1
     assert kinds["tip"] >= 10
+
+
+def _default_run_coverage(name: str) -> tuple[list, dict[str, int]]:
+    res = load_scenario(name).simulate()
+    return surface_coverage(res.truth), kind_counts(res.truth)
+
+
+def test_lab_circle_default_run_touches_every_surface() -> None:
+    (circle, top, left), kinds = _default_run_coverage("lab_circle")
+    assert circle.count >= 20
+    assert circle.tip >= 8
+    assert circle.body >= 8
+    assert circle.arc is not None
+    assert circle.arc >= 90
+    assert top.count >= 6
+    assert left.count >= 10
+    assert kinds["tip"] >= 12
+    assert kinds["body"] >= 10
+
+
+def test_frontier_unhook_puts_joints_back_outermost_first() -> None:
+    from wholearm_tools.sim.collision import Collider
+    from wholearm_tools.sim.occupancy import SweptGrid
+    from wholearm_tools.sim.strategies import make_strategy
+
+    sc = load_scenario("paper_planar")
+    strat = make_strategy("frontier", sc.robot, Collider(sc.robot, sc.obstacles),
+                          SweptGrid(sc.robot), rng=0, home_every=1, unhook=True)
+    home = sc.home.copy()
+    strat.home = home
+    q = home + np.array([0.3, -0.4, 0.5])
+    first = strat.next_target(q)
+    assert first is not None
+    np.testing.assert_allclose(first, [q[0], q[1], home[2]])
+    second = strat.next_target(first)
+    np.testing.assert_allclose(second, [q[0], home[1], home[2]])
+    third = strat.next_target(second)
+    np.testing.assert_allclose(third, home)

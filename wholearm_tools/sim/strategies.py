@@ -218,13 +218,24 @@ class FrontierStrategy(NoveltyStrategy):
     Every move is one of:
 
     * **return home** every ``home_every`` moves (a guarded move back to the start
-      configuration: unfolds an arm hooked around an obstacle);
+      configuration: unfolds an arm hooked around an obstacle).  With ``unhook`` the return is
+      a sequence of single-joint guarded moves, outermost joint first (each move sets joints
+      ``j..n-1`` to their home values): the distal links unwrap before the inner ones swing,
+      so an arm folded around a post comes off it instead of dragging along it;
     * **directed** (probability ``directed``): pick a few *frontier* cells of the swept grid
       (neither swept nor already tried, next to a swept cell) and, for each, solve a damped
       least-squares IK step that carries a probe point of the arm (the tip with probability
       ``tip_probe``, else a random inner joint) to ``overshoot`` metres beyond the cell, moving
       the probe at most ``probe_step`` metres; probing inner joints is what produces link
       contacts;
+    * **follow** (probability ``follow``, right after a blocked move, at most ``follow_max``
+      in a row): aim past the configuration where the arm was just stopped, shifted sideways by
+      a random joint-space step of scale ``follow_step`` [rad]; of a few such candidates the one
+      whose target tip lies farthest from the tip positions of earlier blocked moves wins.  The
+      arm touches the same surface again a little further along it: short moves, many contacts,
+      spread along the surface (from the contact history only).  No follow where more than
+      ``follow_density`` earlier blocked-tip positions lie within ``follow_radius`` m of the
+      last one: a well-touched place sends the arm back to the frontier;
     * **single-joint** (probability ``single_joint``): one joint changed to a uniform value;
     * otherwise a uniform random target, as :class:`NoveltyStrategy`.
 
@@ -237,9 +248,21 @@ class FrontierStrategy(NoveltyStrategy):
 
     def __init__(self, *args: Any, home_every: int = 8, directed: float = 0.5,
                  single_joint: float = 0.2, tip_probe: float = 0.6, probe_step: float = 0.3,
-                 overshoot: float = 0.05, goals: int = 6, **kwargs: Any) -> None:
+                 overshoot: float = 0.05, goals: int = 6, unhook: bool = False,
+                 follow: float = 0.0, follow_step: float = 0.25, follow_max: int = 4,
+                 follow_radius: float = 0.08, follow_density: int = 5,
+                 **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.follow = float(follow)
+        self.follow_step = float(follow_step)
+        self.follow_max = int(follow_max)
+        self.follow_radius = float(follow_radius)
+        self.follow_density = int(follow_density)
+        self._blocked: FloatArray | None = None  # where the last move was stopped, if it was
+        self._streak = 0  # follow moves in a row
         self.home_every = int(home_every)
+        self.unhook = bool(unhook)
+        self._unhook_joints: list[int] = []  # joints still to put back, outermost first
         self.directed = float(directed)
         self.single_joint = float(single_joint)
         self.tip_probe = float(tip_probe)
@@ -259,6 +282,7 @@ class FrontierStrategy(NoveltyStrategy):
 
     def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:
         super().observe(swept, attempted)
+        self._blocked = None if attempted is None or not len(attempted) else attempted[0].copy()
         if attempted is not None and len(attempted):
             # the arm was blocked at attempted[0]: remember where its tip was, and count the
             # cells around it as tried (most blocks are tip contacts)
@@ -314,16 +338,63 @@ class FrontierStrategy(NoveltyStrategy):
         scores += self.rng.uniform(0.0, 0.5, size=scores.shape)
         return cand[ok[int(np.argmax(scores))]]
 
+    def _sparse(self) -> bool:
+        """Fewer than ``follow_density`` earlier blocked-tip positions lie within
+        ``follow_radius`` of the last one (the place is worth following further)."""
+        if not self.touched:
+            return True
+        T = np.array(self.touched)
+        near = np.linalg.norm(T - T[-1], axis=1) < self.follow_radius
+        return int(np.count_nonzero(near)) <= self.follow_density
+
+    def _follow(self, q: FloatArray, stop: FloatArray) -> FloatArray | None:
+        """A move past the configuration ``stop`` where the arm was just blocked, shifted
+        sideways in joint space (see the class docstring)."""
+        d = stop - q
+        dn = float(np.linalg.norm(d))
+        ahead = stop + (0.5 * self.follow_step * d / dn if dn > 1e-9 else 0.0)
+        cand = ahead + self.rng.normal(0.0, self.follow_step, size=(self.candidates, q.size))
+        cand = np.clip(cand, self.lower, self.upper)
+        ok = np.flatnonzero(self.acceptable(q, cand))
+        if ok.size == 0:
+            return None
+        cand = cand[ok]
+        if not self.touched:
+            return cand[0]
+        dim = self.grid.dim
+        tips = self.robot.joint_positions(cand)[:, -1, :dim]
+        T = np.array(self.touched)
+        far = np.min(np.linalg.norm(tips[:, None] - T[None], axis=2), axis=1)
+        far += self.rng.uniform(0.0, 0.5 * self.grid.cell, size=far.shape)
+        return cand[int(np.argmax(far))]
+
     # ------------------------------------------------------------------ strategy
     def next_target(self, q: FloatArray) -> FloatArray | None:
         if self.home is None:
             self.home = q.copy()
+        while self._unhook_joints:
+            j = self._unhook_joints.pop(0)
+            target = q.copy()
+            target[j:] = self.home[j:]  # retry outer joints a blocked step left behind
+            if np.max(np.abs(target - q)) >= 1e-3:
+                return target
         self.count += 1
         if (self.home_every > 0 and self.count % self.home_every == 0
                 and np.linalg.norm(q - self.home) >= self.min_step):
-            return self.home.copy()
-        r = self.rng.random()
+            if not self.unhook:
+                return self.home.copy()
+            self._unhook_joints = list(range(self.robot.dof - 1, -1, -1))
+            return self.next_target(q)
         n = self.robot.dof
+        if (self._blocked is not None and self._streak < self.follow_max
+                and self._sparse() and self.rng.random() < self.follow):
+            self._streak += 1
+            best = self._follow(q, self._blocked)
+            if best is not None:
+                return best
+        else:
+            self._streak = 0
+        r = self.rng.random()
         if r < self.directed:
             front = self.frontier()
             if front.size:
