@@ -46,18 +46,17 @@ command_topic_option = click.option(
 
 
 def prepare_output_dir(path: Path, names: list[str], overwrite: bool) -> None:
-    """Create ``path``; refuse when any of ``names`` already exists in it unless overwriting."""
+    """Refuse when any of ``names`` already exists in ``path`` unless overwriting, or when
+    ``path`` is not a folder.  The folder itself is created by the writer, after the work
+    succeeded, so a failed command leaves nothing behind."""
+    if path.exists() and not path.is_dir():
+        raise click.ClickException(f"{path}: exists and is not a folder")
     existing = [n for n in names if (path / n).exists()]
     if existing and not overwrite:
         raise click.ClickException(
             f"{path}: already holds {', '.join(existing)} (use --overwrite to replace)")
-    if path.exists() and not path.is_dir():
-        raise click.ClickException(f"{path}: exists and is not a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise click.ClickException(f"{path}: cannot create output folder ({exc.strerror})"
-                                   ) from None
+
+
 causal_option = click.option(
     "--causal", is_flag=True,
     help="Classify with the swept map as the robot saw it at each contact (default: whole run).")
