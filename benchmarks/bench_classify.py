@@ -1,6 +1,6 @@
 """Contact detection and tip/link classification accuracy on every bundled scenario.
 
-Run: ``.venv/bin/python benchmarks/bench_classify.py [--seeds 3] [--duration 40]
+Run: ``.venv/bin/python benchmarks/bench_classify.py [--seeds 3] [--duration SECONDS]
 [--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar]``
 
 For every scenario × seed the run is simulated in process; for every B the contacts are
@@ -11,7 +11,7 @@ classified offline (whole-run map) and causally (map up to each contact).  Colum
 * ``lab%``: tip/link labels that agree with the truth among the contacts labelled (not
   ambiguous), offline; ``amb%``: ambiguous fraction, offline; ``lab%c``/``amb%c``: causal;
 * ``|P-T| off`` / ``|P-T| cau``: mean |P_T − truth| (truth 1 for tip/joint, 0 for body);
-* ``s``: seconds spent in detection + classification (both modes).
+* ``s``: seconds spent in detection + classification (both modes), summed over the seeds.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ def evaluate(run, B):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--duration", type=float, default=40.0)
+    ap.add_argument("--duration", type=float, default=None,
+                    help="seconds per run (default: each scenario's own duration)")
     ap.add_argument("--B", type=float, nargs="+", default=[0.01, 0.02, 0.04])
     ap.add_argument("--scenarios", nargs="+", default=None)
     args = ap.parse_args()

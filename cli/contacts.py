@@ -1,12 +1,18 @@
 """``wholearm contacts RUN.mcap --B 0.02``: detected contacts, link in contact, tip probability.
 
-CSV columns (one row per contact, time order): ``contact`` (0-based), ``t`` [s, log clock],
-``index`` (log sample), ``link`` (0-based link in contact), ``p_tip`` (eq. 2, offline map or
-causal with ``--causal``), ``label`` (tip / link / ambiguous), ``variance`` (σ² for fit weights,
-m²), ``p_tip_nomap`` (eq. 2 without the map), ``p_tip_swept`` (eq. 1), ``consistent`` (0 when the
-map left no admissible boundary), ``t_end`` [s], ``q_<joint>`` (configuration at contact, rad),
-``qd_<joint>`` (joint velocity just before the stop, rad/s), and for simulated runs
-``true_link``, ``true_kind`` (-1 / empty when the detection matches no true contact).
+The CSV (``-o contacts.csv``) is the fit's contact table (``wholearm_tools.contact_table``, the
+file ``wholearm fit contacts.csv`` reads) with diagnostic columns appended, one row per contact
+in time order:
+
+* the table's columns: ``t`` [s], ``link`` (0-based), ``p_tip`` (eq. 2, offline map, or causal
+  with ``--causal``), ``label`` (tip / link / ambiguous), ``variance`` (σ² for the fit, m²),
+  ``used_as``, ``tip_x, tip_y[, tip_z]``, ``tip_radius``, ``a_*``, ``b_*`` (link axis),
+  ``link_radius``, ``primitive``, ``residual`` (empty before fitting);
+* diagnostics (ignored by the fit): ``contact`` (0-based), ``index`` (log sample),
+  ``p_tip_nomap`` (eq. 2 without the map), ``p_tip_swept`` (eq. 1), ``consistent`` (0 when the
+  map left no admissible boundary), ``t_end`` [s], ``q_<joint>`` (configuration at contact,
+  rad), ``qd_<joint>`` (joint velocity just before the stop, rad/s), and for simulated runs
+  ``true_link``, ``true_kind`` (-1 / empty when the detection matches no true contact).
 """
 
 from __future__ import annotations
@@ -25,34 +31,45 @@ from cli.options import check_output_file, json_option, overwrite_option
 log = logging.getLogger(__name__)
 
 
-def contact_rows(run: Any, B: float, causal: bool) -> list[dict[str, Any]]:
-    """Detect, classify and (when ground truth exists) match: one dict per contact."""
+def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict[str, Any]]]:
+    """Detect, classify and (when ground truth exists) match.
+
+    Returns the CSV header and one dict per contact: the contact table's columns (as the fit
+    writes them) followed by the diagnostic columns.
+    """
     from wholearm_tools.classify import tip_probability
     from wholearm_tools.contacts import detect_contacts, match_truth
+    from wholearm_tools.pipeline import contact_table
 
     contacts = detect_contacts(run.log, run.robot)
     cls = tip_probability(run, contacts, B, causal=causal)
+    table = contact_table(run.robot, contacts, cls)
+    reader = csv.DictReader(io.StringIO(table.to_csv()))
+    base = list(reader)
+    header = list(reader.fieldnames or [])
     match = match_truth(contacts, run.truth) if run.truth is not None else None
     names = run.robot.joint_names
+    extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "t_end",
+             *[f"q_{n}" for n in names], *[f"qd_{n}" for n in names]]
+    if match is not None:
+        extra += ["true_link", "true_kind"]
     rows = []
     for k in range(len(contacts)):
-        row: dict[str, Any] = {
-            "contact": k, "t": round(float(contacts.t[k]), 6), "index": int(contacts.index[k]),
-            "link": int(contacts.link[k]), "p_tip": round(float(cls.p_tip[k]), 6),
-            "label": str(cls.label[k]), "variance": float(f"{cls.variance[k]:.6g}"),
-            "p_tip_nomap": round(float(cls.p_tip_nomap[k]), 6),
-            "p_tip_swept": round(float(cls.p_tip_swept[k]), 6),
-            "consistent": int(cls.consistent[k]), "t_end": round(float(contacts.t_end[k]), 6)}
-        row.update({f"q_{n}": float(f"{v:.8g}") for n, v in zip(names, contacts.q[k],
-                                                                 strict=True)})
-        row.update({f"qd_{n}": float(f"{v:.6g}") for n, v in zip(names, contacts.qd_before[k],
-                                                                  strict=True)})
+        row: dict[str, Any] = dict(base[k])
+        row.update({
+            "contact": k, "index": int(contacts.index[k]),
+            "p_tip_nomap": f"{cls.p_tip_nomap[k]:.6f}",
+            "p_tip_swept": f"{cls.p_tip_swept[k]:.6f}",
+            "consistent": int(cls.consistent[k]), "t_end": f"{contacts.t_end[k]:.6f}"})
+        row.update({f"q_{n}": f"{v:.8g}" for n, v in zip(names, contacts.q[k], strict=True)})
+        row.update({f"qd_{n}": f"{v:.6g}" for n, v in zip(names, contacts.qd_before[k],
+                                                           strict=True)})
         if match is not None and run.truth is not None:
             j = int(match[k])
             row["true_link"] = int(run.truth.contact_link[j]) if j >= 0 else -1
             row["true_kind"] = str(run.truth.contact_kind[j]) if j >= 0 else ""
         rows.append(row)
-    return rows
+    return header + extra, rows
 
 
 @click.command("contacts")
@@ -79,13 +96,10 @@ def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: 
     if output is not None:
         check_output_file(output, overwrite)
     data = read_run(run, robot=robot_file, require_commands=True)
-    rows = contact_rows(data, B, causal)
+    fields, rows = contact_rows(data, B, causal)
     log.info("%d contacts in %s", len(rows), run)
     if output is not None:
         buf = io.StringIO()
-        fields = list(rows[0]) if rows else ["contact", "t", "index", "link", "p_tip", "label",
-                                             "variance", "p_tip_nomap", "p_tip_swept",
-                                             "consistent", "t_end"]
         writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
@@ -99,8 +113,8 @@ def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: 
         truth = bool(rows) and "true_link" in rows[0]
         click.echo(head + ("  true" if truth else ""))
         for r in rows:
-            line = (f"{r['contact']:>3} {r['t']:>9.3f} {r['link']:>4} {r['p_tip']:>6.3f} "
-                    f"{r['label']:<9}")
+            line = (f"{r['contact']:>3} {float(r['t']):>9.3f} {r['link']:>4} "
+                    f"{float(r['p_tip']):>6.3f} {r['label']:<9}")
             if truth:
                 line += f"  {r['true_link']} {r['true_kind']}"
             click.echo(line)

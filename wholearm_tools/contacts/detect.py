@@ -65,6 +65,17 @@ class DetectionParams:
         (at least one sample, so a 50 Hz log is not smoothed).
     before_time : float
         Window in seconds before the stop over which ``qd_before`` is averaged.
+    motion_torque_fraction : float
+        A joint is loaded only when ``|tau_cmd|`` also exceeds this fraction of its median
+        ``|tau_cmd|`` while it moves freely: a contact torque builds up beyond the motion
+        torque, while a joint creeping near its target carries a torque that is far above the
+        (tiny) noise yet far below the motion level.
+    rigid_outer : bool
+        When the joints beyond the stopped link were at rest and unloaded (a single-joint
+        move), assign the contact to the outermost link of that rigid group instead of the
+        innermost (see :func:`_extend_rigid`).  On by default: on the bundled scenarios it
+        lifts link identification from 48-85 % to 80-100 %; it still misnames inner-link body
+        contacts made during single-joint moves (well_junction).
     velocity_threshold, torque_threshold : float or (n,) float, optional
         Absolute overrides of the noise-derived thresholds.
     """
@@ -75,11 +86,14 @@ class DetectionParams:
     min_stop_samples: int = 2
     smooth_time: float = 0.01
     before_time: float = 0.02
+    motion_torque_fraction: float = 0.2
+    rigid_outer: bool = True
     velocity_threshold: Any = None
     torque_threshold: Any = None
 
     def __post_init__(self) -> None:
-        for name in ("k_velocity", "k_torque", "min_stop_time", "smooth_time", "before_time"):
+        for name in ("k_velocity", "k_torque", "min_stop_time", "smooth_time", "before_time",
+                     "motion_torque_fraction"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be a finite non-negative number, got {value!r}")
@@ -192,6 +206,21 @@ def _white_scale(x: FloatArray) -> FloatArray:
                       1e-12)
 
 
+def _second_diff_scale(x: FloatArray, mask: NDArray[np.bool_]) -> FloatArray:
+    """White-noise scale of each column from second differences: 1.4826 MAD(d2 x) / sqrt 6.
+
+    Only differences whose three samples all lie in ``mask`` are used (all of them if fewer than
+    10 do).  Linear ramps and plateaus have zero second difference, so they do not inflate it.
+    """
+    if x.shape[0] < 4:
+        return np.full(x.shape[1], 1e-12)
+    d2 = x[2:] - 2 * x[1:-1] + x[:-2]
+    ok = mask[2:] & mask[1:-1] & mask[:-2]
+    if np.count_nonzero(ok) >= 10:
+        d2 = d2[ok]
+    return np.maximum(_MAD * np.median(np.abs(d2), axis=0) / np.sqrt(6), 1e-12)
+
+
 def _smooth(x: FloatArray, width: int) -> FloatArray:
     """Centred moving average over ``width`` samples (edges use a shrinking window)."""
     if width <= 1:
@@ -224,10 +253,14 @@ def estimate_noise(log: JointLog, params: DetectionParams | None = None
     quantum = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
     floor = np.maximum(0.5 * quantum / dt / width, 1e-9)
     sigma_v = np.maximum(_clipped_scale(qd, np.maximum(_white_scale(qd), floor)), floor)
+    # torque noise from second differences on the samples where the arm is at rest: a contact
+    # torque ramps linearly (impedance spring against a moving set point) or saturates, so its
+    # second difference vanishes; the level of the contact torques never enters the estimate
+    # (a clipped MAD of the torque itself is dominated by them when a joint spends most of its
+    # rest time blocked)
     rest = np.all(np.abs(qd) < 4.0 * sigma_v, axis=1)
     tau = np.asarray(log.tau_cmd)
-    start = _white_scale(tau[rest]) if np.count_nonzero(rest) >= 3 else _white_scale(tau)
-    sigma_tau = _clipped_scale(tau, np.maximum(start, 1e-9), mask=rest if np.any(rest) else None)
+    sigma_tau = _second_diff_scale(tau, rest)
     # floor: half the torque resolution (a quantised encoder makes tau move in steps; with a
     # perfectly quiet arm the scale above collapses to zero)
     dtau = np.abs(np.diff(tau, axis=0))
@@ -284,6 +317,69 @@ def contact_link_per_sample(stopped: NDArray[np.bool_], loaded: NDArray[np.bool_
     return idx.max(axis=1).astype(np.int64)
 
 
+def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
+                  loaded: NDArray[np.bool_], nb: int) -> list[tuple[int, int, int]]:
+    """Move a contact to the outermost link of the rigid group that was moving.
+
+    When joints ``n+1..m`` were at rest and unloaded before and at the stop (a single-joint
+    move of an inner joint), links ``n..m`` moved as one rigid body and the joint signals cannot
+    tell which of them touched.  The outer link sweeps by far the most space per unit of motion
+    (eq. 1: the probability of touching is the swept share), so the contact is assigned to
+    link ``m``; the tip probability then decides between its tip and its body.
+    """
+    n = stopped.shape[1]
+    out = []
+    for s, e, link in rows:
+        lo = max(0, s - nb)
+        m = link
+        while (m + 1 < n and np.all(stopped[lo:s + 1, m + 1])
+               and not np.any(loaded[lo:s + 1, m + 1])):
+            m += 1
+        out.append((s, e, m))
+    return out
+
+
+def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
+                     blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
+                     qd_s: FloatArray, v_th: FloatArray) -> list[tuple[int, int, int]]:
+    """Recover the inner contact of a quick two-stage event.
+
+    When link ``j`` touches and an outer link ``n`` stops on its own obstacle less than the
+    minimum duration later, the debounced label jumps straight to ``n``.  Joint ``j`` then
+    shows a stop that began distinctly earlier (``gap`` samples, more than the smoothing can
+    shift a stop) than joint ``n``'s, after clear motion (3 velocity thresholds), and lasted up
+    to the rise, where it is blocked (loaded):
+    that earlier stop is a contact on link ``j`` (the outermost such joint).
+    """
+    out: list[tuple[int, int, int]] = []
+    prev_label = -1
+    for s, e, link in rows:
+        prev_label = int(labels[s - 1]) if s > 0 else -1
+
+        def onset(j: int, arr: NDArray[np.bool_], s: int = s) -> int:
+            k = s
+            while k > 0 and arr[k - 1, j]:
+                k -= 1
+            return k
+
+        on_n = onset(link, stopped)
+        extra = None
+        for j in range(link - 1, prev_label, -1):
+            if not blocked[s, j]:
+                continue
+            on_j = onset(j, stopped)
+            # ... and it was a real stop: the joint was moving clearly (not creeping) before it
+            approach = np.abs(qd_s[max(0, on_j - 2 * gap):on_j + 1, j])
+            if (on_j <= on_n - gap and np.all(stopped[on_j:s + 1, : j + 1])
+                    and approach.size and approach.max() > 3 * v_th[j]):
+                extra = (on_j, s, j)
+                break
+        if extra is not None:
+            out.append(extra)
+        out.append((s, e, link))
+    return out
+
+
 def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                     params: DetectionParams | None = None) -> Contacts:
     """Detect contacts and identify the link in contact from ``qd`` and ``tau_cmd`` only.
@@ -314,9 +410,16 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     sigma_v, sigma_tau, qd_s = estimate_noise(log, params)
     v_th = (np.broadcast_to(np.asarray(params.velocity_threshold, float), (n,)).copy()
             if params.velocity_threshold is not None else params.k_velocity * sigma_v)
-    tau_th = (np.broadcast_to(np.asarray(params.torque_threshold, float), (n,)).copy()
-              if params.torque_threshold is not None else params.k_torque * sigma_tau)
     tau = np.asarray(log.tau_cmd)
+    if params.torque_threshold is not None:
+        tau_th = np.broadcast_to(np.asarray(params.torque_threshold, float), (n,)).copy()
+    else:
+        moving = np.abs(qd_s) > v_th
+        tau_motion = np.array([float(np.median(np.abs(tau[moving[:, j], j])))
+                               if np.count_nonzero(moving[:, j]) >= 10 else 0.0
+                               for j in range(n)])
+        tau_th = np.maximum(params.k_torque * sigma_tau,
+                            params.motion_torque_fraction * tau_motion)
     stopped = np.abs(qd_s) < v_th
     loaded = np.abs(tau) > tau_th
     dt = 1.0 / log.rate
@@ -333,6 +436,10 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         if cur > prev and cur >= 0 and s > 0:
             rows.append((int(s), int(e), cur))
         prev = cur
+    if params.rigid_outer:
+        rows = _extend_rigid(rows, stopped, loaded, max(2, round(params.before_time / dt)))
+    rows = _split_two_stage(rows, labels, stopped & loaded, stopped,
+                            max(2, round(params.smooth_time / dt)) + 1, qd_s, v_th)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": sigma_tau.tolist(),
             "min_stop_samples": min_len, "rate": log.rate}
     if not rows:

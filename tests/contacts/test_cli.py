@@ -1,0 +1,101 @@
+"""``wholearm contacts`` and ``wholearm plot-ptip`` through click's CliRunner."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from cli.main import cli
+from wholearm_tools.contact_table import read_contact_table
+
+
+def run(*args: str):
+    return CliRunner().invoke(cli, list(args))
+
+
+@pytest.fixture(scope="module")
+def mcap(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("run") / "run.mcap"
+    res = run("simulate", "lab_circle", "-o", str(out), "--duration", "12", "--seed", "1")
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_contacts_csv_is_the_fit_table_plus_diagnostics(mcap: Path, tmp_path: Path) -> None:
+    out = tmp_path / "contacts.csv"
+    res = run("contacts", str(mcap), "--B", "0.02", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    table = read_contact_table(out)
+    assert len(table) >= 3
+    assert table.dim == 2
+    with out.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(table)
+    for col in ("p_tip_nomap", "p_tip_swept", "consistent", "true_link", "true_kind"):
+        assert col in rows[0], col
+    assert sum(c.startswith("q_") for c in rows[0]) == 2
+    assert sum(c.startswith("qd_") for c in rows[0]) == 2
+    # the link in contact agrees with the truth on a short lab run
+    agree = sum(int(r["link"]) == int(r["true_link"]) for r in rows)
+    assert agree >= 0.9 * len(rows)
+
+
+def test_fit_reads_the_contacts_csv(mcap: Path, tmp_path: Path) -> None:
+    out = tmp_path / "contacts.csv"
+    assert run("contacts", str(mcap), "--B", "0.02", "-o", str(out)).exit_code == 0
+    res = run("fit", str(out), "-o", str(tmp_path / "map.json"))
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "map.json").read_text())["format"] == "wholearm-map"
+
+
+def test_contacts_json_and_table(mcap: Path) -> None:
+    res = run("contacts", str(mcap), "--B", "0.02", "--json", "--causal")
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["causal"] is True
+    assert doc["contacts"]
+    res = run("contacts", str(mcap), "--B", "0.02")
+    assert res.exit_code == 0, res.output
+    assert "P_T" in res.output.splitlines()[0]
+
+
+def test_plot_ptip_writes_png(mcap: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ptip.png"
+    res = run("plot-ptip", str(mcap), "--B", "0.02", "-o", str(out), "--steps", "20")
+    assert res.exit_code == 0, res.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_missing_b_is_a_usage_error(mcap: Path) -> None:
+    res = run("contacts", str(mcap))
+    assert res.exit_code == 2
+    assert "--B" in res.output
+    assert "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
+def test_bad_file_is_a_one_line_error(command: str, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    args = [command, str(bad), "--B", "0.02"]
+    if command == "plot-ptip":
+        args += ["-o", str(tmp_path / "p.png")]
+    res = run(*args)
+    assert res.exit_code != 0
+    assert "Traceback" not in res.output
+    errors = [line for line in res.output.splitlines() if line.startswith("Error")]
+    assert len(errors) == 1, res.output
+    assert not (tmp_path / "p.png").exists()
+
+
+def test_existing_output_is_refused(mcap: Path, tmp_path: Path) -> None:
+    out = tmp_path / "contacts.csv"
+    out.write_text("keep me")
+    res = run("contacts", str(mcap), "--B", "0.02", "-o", str(out))
+    assert res.exit_code == 1
+    assert "--overwrite" in res.output
+    assert out.read_text() == "keep me"
