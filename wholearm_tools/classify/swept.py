@@ -210,8 +210,8 @@ def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
     first.setflags(write=True)
     for a_row, b_row, r in parts:
         # each capsule is subsampled at its own pace: an inner link moves far less than the tip,
-        # so it needs far fewer rasterised poses (half its own radius, at least a cell, apart)
-        keep = pose_subsample(pts[:, [a_row, b_row]], max(0.5 * r, res))
+        # so it needs far fewer rasterised poses (half its own radius, at least half a cell, apart)
+        keep = pose_subsample(pts[:, [a_row, b_row]], max(0.5 * r, 0.5 * res))
         # ... and at least every MAX_POSE_GAP samples, so a slowly creeping link still gets
         # first-sweep times close to the truth (the causal map depends on them)
         regular = np.arange(0, q.shape[0], MAX_POSE_GAP)
