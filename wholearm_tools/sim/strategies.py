@@ -240,7 +240,12 @@ class FrontierStrategy(NoveltyStrategy):
     * otherwise a uniform random target, as :class:`NoveltyStrategy`.
 
     In each family the candidate whose straight joint-space path visits the most unexplored
-    cells wins (seeded tie break).  Nothing here reads the environment: frontier cells come from
+    cells wins (seeded tie break).  With ``crowd`` > 0 that score loses ``crowd`` per earlier
+    blocked-tip position within ``crowd_radius`` m of the candidate's tip path, and the uniform
+    fallback is scored the same way: the arm spends fewer moves where it has already been
+    stopped many times and more on the surfaces it has touched little (balancing from its own
+    contact history; ``crowd`` = 0 keeps the original behaviour and random draws).
+    Nothing here reads the environment: frontier cells come from
     the swept map and the blocked moves (``observe``), i.e. the robot's own motion history.
     """
 
@@ -250,9 +255,11 @@ class FrontierStrategy(NoveltyStrategy):
                  single_joint: float = 0.2, tip_probe: float = 0.6, probe_step: float = 0.3,
                  overshoot: float = 0.05, goals: int = 6, unhook: bool = False,
                  follow: float = 0.0, follow_step: float = 0.25, follow_max: int = 4,
-                 follow_radius: float = 0.08, follow_density: int = 5,
-                 **kwargs: Any) -> None:
+                 follow_radius: float = 0.08, follow_density: int = 5, crowd: float = 0.0,
+                 crowd_radius: float = 0.1, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.crowd = float(crowd)
+        self.crowd_radius = float(crowd_radius)
         self.follow = float(follow)
         self.follow_step = float(follow_step)
         self.follow_max = int(follow_max)
@@ -335,8 +342,28 @@ class FrontierStrategy(NoveltyStrategy):
             return None
         fr = np.linspace(0.0, 1.0, self.path_samples)[1:, None]
         scores = np.array([self.grid.novelty(q + fr * (c - q)) for c in cand[ok]], dtype=float)
+        if self.crowd > 0.0 and self.touched:
+            scores -= self.crowd * self._crowding(q, cand[ok])
         scores += self.rng.uniform(0.0, 0.5, size=scores.shape)
         return cand[ok[int(np.argmax(scores))]]
+
+    def _crowding(self, q: FloatArray, cand: FloatArray) -> FloatArray:
+        """Per candidate: how many earlier blocked-tip positions lie within ``crowd_radius`` of
+        the tip's path (a polyline through 12 configurations of the straight joint-space move).
+        A move whose tip runs through a well-touched place is likely to be stopped there again
+        and learn little."""
+        dim = self.grid.dim
+        fr = np.linspace(0.0, 1.0, 12)[None, :, None]
+        paths = q + fr * (cand - q)[:, None, :]  # (C, S, n)
+        tips = self.robot.joint_positions(paths.reshape(-1, q.size))[:, -1, :dim]
+        tips = tips.reshape(len(cand), -1, dim)
+        a, b = tips[:, :-1, None, :], tips[:, 1:, None, :]  # (C, S-1, 1, dim)
+        T = np.array(self.touched)[None, None]  # (1, 1, M, dim)
+        ab = b - a
+        t = np.clip(np.sum((T - a) * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1),
+                                                               1e-12), 0.0, 1.0)
+        d = np.linalg.norm(a + t[..., None] * ab - T, axis=-1).min(axis=1)  # (C, M)
+        return np.count_nonzero(d < self.crowd_radius, axis=1).astype(float)
 
     def _sparse(self) -> bool:
         """Fewer than ``follow_density`` earlier blocked-tip positions lie within
@@ -428,6 +455,10 @@ class FrontierStrategy(NoveltyStrategy):
             vals = self.uniform(self.candidates, q)
             cand[np.arange(self.candidates), joints] = vals[np.arange(self.candidates), joints]
             best = self._best(q, cand)
+            if best is not None:
+                return best
+        if self.crowd > 0.0:
+            best = self._best(q, self.uniform(self.candidates, q))
             if best is not None:
                 return best
         return super().next_target(q)
