@@ -1,0 +1,27 @@
+"""The main job end to end on a short planar run: every deliverable is written and readable."""
+
+from __future__ import annotations
+
+from click.testing import CliRunner
+
+from cli.main import cli
+from wholearm_tools.logs import read_run
+from wholearm_tools.mapfile import read_map
+
+
+def test_demo_writes_every_deliverable(tmp_path) -> None:
+    out = tmp_path / "demo"
+    result = CliRunner().invoke(cli, ["demo", "-o", str(out), "--scenario", "lab_circle",
+                                      "--duration", "20"])
+    assert result.exit_code == 0, result.output
+    for name in ("run.mcap", "map.json", "contacts.csv", "map.ply", "map.stl", "map.obj",
+                 "map.glb", "map.vtp", "overlay.mcap", "report.pdf"):
+        assert (out / name).stat().st_size > 0, name
+    assert (out / "report.pdf").read_bytes().startswith(b"%PDF")
+    surface_map = read_map(out / "map.json")
+    assert surface_map.planar
+    assert surface_map.primitives, "the demo map has no primitive"
+    run = read_run(out / "run.mcap")
+    assert run.truth is not None and run.truth.n_contacts > 0
+    assert "outputs in" in result.output
+    assert not list(out.glob(".*.tmp")), "temporary files left behind"
