@@ -214,6 +214,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     if len(reps) < m_all:
         messages.append(f"{m_all - len(reps)} repeated contacts (same configuration) counted "
                         f"once: {len(reps)} distinct of {m_all}")
+    free_points = _with_contact_hints(table, free_points)
     data, order = fit_data_from_table(table, free_points, rows=reps)
     need = min(MODELS[k].dof for k in kinds) + 3
     seg = segment(data, kinds=kinds, noise=noise, noise_floor=noise_floor,
@@ -279,6 +280,23 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                              contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
     table = table.with_assignment(assignment, residual)
     return surface_map, tuple(fits), table, tuple(messages)
+
+
+def _with_contact_hints(table: ContactTable, free_points: NDArray | None) -> NDArray | None:
+    """Free-space hints plus, for every contact, two points on the contacting link's axis just
+    behind its outer end (1.5 and 3 contact radii inwards): the robot itself was there, right
+    in front of the surface, which tells the free side of the surface locally (a tip on a
+    bore wall of radius R fits a cylinder of radius R - 2w seen from outside just as well)."""
+    if len(table) == 0:
+        return free_points
+    d = table.seg_a - table.seg_b
+    length = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+    w = np.maximum(table.tip_radius, table.link_radius)
+    pts = [table.seg_b + np.minimum(k * w / length, 0.5)[:, None] * d for k in (1.5, 3.0)]
+    own = np.concatenate(pts, axis=0)
+    if free_points is None or len(free_points) == 0:
+        return own
+    return np.concatenate([np.asarray(free_points, dtype=float), own], axis=0)
 
 
 def _support_points(fit: Any, data: Any, members: NDArray, n_tip: int) -> NDArray:

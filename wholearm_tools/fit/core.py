@@ -471,6 +471,47 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
     return [1.0, -1.0]
 
 
+def _near_radius(tip_w: np.ndarray, link_w: np.ndarray, default: float) -> float:
+    w = max(float(np.max(tip_w, initial=0.0)), float(np.max(link_w, initial=0.0)))
+    return 3.0 * w if w > 0 else default
+
+
+def _local_hints(nd: _Norm) -> np.ndarray:
+    """Free-space hints (free points, link axes) within three contact radii of the support's
+    contact points: the robot right behind the contacts.  Far hints say little about a closed
+    primitive's side: the infinite extension of a correct bore crosses the robot's other poses
+    next to a junction."""
+    hints = np.vstack([nd.free, nd.a, nd.b])
+    sup = np.vstack([nd.tip, nd.a, nd.b])
+    if len(hints) == 0 or len(sup) == 0:
+        return hints[:0]
+    r = _near_radius(nd.tip_w, nd.link_w, 0.25)
+    d2 = np.min(np.sum((hints[:, None, :] - sup[None, :, :]) ** 2, axis=2), axis=1)
+    return hints[d2 <= r * r]
+
+
+def free_space_violation(kind: str, params: dict[str, Any], free_side: float, data: FitData
+                         ) -> float:
+    """Fraction of the free-space hints next to the contacts of ``data`` (within three contact
+    radii) that lie on the occupied side of the primitive — 0 for a surface the robot was
+    always in front of; large for a kinematic artefact such as the sphere of one joint's
+    positions about the joint before it (all contacts at that joint lie on it, the next link
+    pierces it)."""
+    m = MODELS[kind]
+    nd = _Norm(np.zeros(m.dim), 1.0, data.tip_points, data.tip_radius, data.tip_weight,
+               data.link_a, data.link_b, data.link_radius, data.link_weight, data.free_points)
+    th = _raw_from_params(m, params, nd)
+    # the support is where the contacts touch: tips, and links at their least clearance
+    _, t, _ = _link_min(m, th, float(free_side), nd.a, nd.b)
+    touch = nd.a + t[:, None] * (nd.b - nd.a)
+    local = _local_hints(dataclasses.replace(nd, tip=np.vstack([nd.tip, touch]),
+                                             a=nd.a[:0], b=nd.b[:0]))
+    if len(local) == 0:
+        return 0.0
+    sd = float(free_side) * signed_distance_np(m, th, local)
+    return float(np.mean(sd < 0.0))
+
+
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:
     """Choose between the fits made with either free side: converged first, then the fewer
     free-space hints (free points, link axes) on the wrong side of the fitted surface, then the
@@ -478,19 +519,29 @@ def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:
     hints = np.vstack([nd.free, nd.a, nd.b])
     origin = (-nd.mu / nd.scale)[None, :]
 
+    local = _local_hints(nd)
+
     def key(side: float) -> tuple[float, ...]:
         f = fits[side]
+        out, inn = _votes(m, f.th, local, 0.01)
+        wrong_local = inn if side > 0 else out
         out, inn = _votes(m, f.th, hints, 0.01)
         wrong = inn if side > 0 else out
         o_out, o_in = _votes(m, f.th, origin, 0.05)
         o_wrong = float(o_in if side > 0 else o_out)
-        return (0.0 if f.success else 1.0, float(wrong), 0.0, o_wrong, -side)
+        return (0.0 if f.success else 1.0, 0.0, float(wrong_local), float(wrong), 0.0, o_wrong,
+                -side)
 
     costs = {sd: fits[sd].cost for sd in fits}
     k = {sd: list(key(sd)) for sd in fits}
     lo = min(costs.values())
-    for sd in fits:  # cost only counts when clearly different
-        k[sd][2] = 0.0 if costs[sd] <= 1.5 * lo + 1e-14 else 1.0
+    for sd in fits:
+        # a side that fits many times worse loses whatever the hints say: the global hints
+        # are the whole run's poses, and next to another surface (a junction of two bores)
+        # the infinite extension of a correct primitive has the robot on its "wrong" side
+        k[sd][1] = 0.0 if costs[sd] <= 10.0 * lo + 1e-14 else 1.0
+        # otherwise cost only counts when clearly different
+        k[sd][4] = 0.0 if costs[sd] <= 1.5 * lo + 1e-14 else 1.0
     return min(fits, key=lambda sd: tuple(k[sd]))
 
 
@@ -732,3 +783,45 @@ def cost(kind: str, params: dict[str, Any], data: FitData, free_side: float,
     W = np.concatenate([data.tip_weight, data.link_weight])
     W = W / W.mean()
     return float(np.sum(rho_np(np.sqrt(W) * r, loss, delta)))
+
+
+def consensus(kind: str, data: FitData, anchor: int, tol: float, rng: np.random.Generator,
+              trials: int = 24) -> np.ndarray:
+    """Largest set of contacts of ``data`` within ``tol`` metres of a primitive guessed
+    algebraically (the type's initial guesses, either free side) from ``dof + 1`` contacts that
+    include ``anchor``; contact indices, sorted (RANSAC, no solver: cheap).
+
+    Used for seeds whose neighbourhood mixes surfaces (next to the intersection of two bores)
+    or contacts whose classification is wrong: a least-squares seed is then pulled by the
+    outliers and trimming its worst residual removes good contacts.
+    """
+    m = MODELS[kind]
+    n = data.n_contacts
+    nd = _normalise(data)
+    if nd is None or n <= m.dof:
+        return np.zeros(0, dtype=int)
+    nt = data.n_tip
+    others = np.delete(np.arange(n), anchor)
+    best = np.zeros(0, dtype=int)
+    best_key = (0, -np.inf)
+    tol_n = tol / nd.scale
+    for _ in range(trials):
+        sub = np.sort(np.concatenate([[anchor], rng.choice(others, m.dof, replace=False)]))
+        ti, li = sub[sub < nt], sub[sub >= nt] - nt
+        for side in ([1.0] if m.linear else [1.0, -1.0]):
+            ctx = InitContext(nd.tip[ti], nd.tip_w[ti], nd.a[li], nd.b[li], nd.link_w[li], side)
+            try:
+                guess = m.quick_init(ctx) if m.quick_init else m.init(ctx)[:1]
+                cands = [c for c in guess if np.all(np.isfinite(c))]
+            except (np.linalg.LinAlgError, ValueError, IndexError):
+                continue
+            for th in cands:
+                rt, rl, _, _ = _residuals_norm(m, th, side, nd)
+                r = np.abs(np.concatenate([rt, rl]))
+                inl = np.flatnonzero(r <= tol_n)
+                if anchor not in inl:
+                    continue
+                key = (len(inl), -float(np.sum(np.minimum(r, tol_n) ** 2)))
+                if key > best_key:
+                    best, best_key = inl, key
+    return best

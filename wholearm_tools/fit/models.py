@@ -79,6 +79,8 @@ class Model:
     linear: bool = False
     #: number of IPOPT starts tried (best initial guesses first)
     starts: int = 1
+    #: one cheap initial guess (RANSAC hypotheses); None uses the first of :attr:`init`
+    quick_init: Callable[[InitContext], list[FloatArray]] | None = None
 
 
 @dataclass(frozen=True)
@@ -304,6 +306,11 @@ def _round_init(ctx: InitContext) -> list[FloatArray]:
     return out
 
 
+def _round_quick(ctx: InitContext) -> list[FloatArray]:
+    c, r = kasa(ctx.surface_points)
+    return [np.concatenate([c, [max(r - ctx.side * float(np.mean(ctx.offsets)), 10 * _R_MIN)]])]
+
+
 for _kind, _d in (("circle", 2), ("sphere", 3)):
     _register(Model(
         kind=_kind, dim=_d, dof=_d + 1, n_raw=_d + 1,
@@ -311,7 +318,7 @@ for _kind, _d in (("circle", 2), ("sphere", 3)):
         sd=_round_sd(_d), eq=_no_constraints, ineq=_no_constraints,
         to_params=_round_params(_d),
         params=(ParamSpec("center", _d, "point"), ParamSpec("radius", 1, "length")),
-        init=_round_init, min_rank=_d,
+        init=_round_init, min_rank=_d, quick_init=_round_quick,
     ))
 
 
@@ -391,8 +398,102 @@ def _cyl_from_axis(ctx: InitContext, axis: FloatArray) -> FloatArray:
     return np.concatenate([p, axis, [r_surf]])
 
 
+def _hemisphere(n: int) -> FloatArray:
+    """``n`` unit vectors spread evenly over the upper hemisphere (Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - i / n
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    rr = np.sqrt(1.0 - z * z)
+    return np.stack([rr * np.cos(phi), rr * np.sin(phi), z], axis=1)
+
+
+_DIRECTIONS = _hemisphere(400)
+
+
+def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
+               ) -> list[FloatArray]:
+    """Best cylinder axes by direction sampling: for each of 400 directions, the algebraic
+    circle fit of the surface samples projected on the perpendicular plane, with the contact
+    radii as offsets (``rho_i = r + side * w_i``), scored by the geometric residual; the best
+    ``keep`` mutually distinct directions.  Robust to partial arcs where local normals and PCA
+    fail, and cheap (vectorised numpy, no solver)."""
+    X = ctx.surface_points
+    off = ctx.offsets
+    if len(X) < 5:
+        return []
+    A = _DIRECTIONS
+    E = np.eye(3)[np.argmin(np.abs(A), axis=1)]
+    U = np.cross(A, E)
+    U /= np.linalg.norm(U, axis=1, keepdims=True)
+    V = np.cross(A, U)
+    x = X @ U.T  # (N, K)
+    y = X @ V.T
+    # Kasa circle fit per direction: [2x 2y 1] [cx cy c]^T = x^2 + y^2
+    M = np.stack([2 * x, 2 * y, np.ones_like(x)], axis=2)  # (N, K, 3)
+    rhs = x * x + y * y
+    MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(3)
+    Mty = np.einsum("nki,nk->ki", M, rhs)
+    sol = np.linalg.solve(MtM, Mty[..., None])[..., 0]  # (K, 3)
+    cx, cy = sol[:, 0], sol[:, 1]
+    rho = np.sqrt((x - cx) ** 2 + (y - cy) ** 2)  # (N, K)
+    r = np.mean(rho - ctx.side * off[:, None], axis=0)
+    res = rho - ctx.side * off[:, None] - r
+    score = np.sum(res * res, axis=0)
+    score[~np.isfinite(score) | (r <= 0)] = np.inf
+    out: list[FloatArray] = []
+    cos_min = np.cos(np.radians(min_angle_deg))
+    for k in np.argsort(score):
+        if not np.isfinite(score[k]) or len(out) >= keep:
+            break
+        if all(abs(float(A[k] @ a)) < cos_min for a in out):
+            out.append(A[k])
+    return [_refine_axis(X, off, ctx.side, a) for a in out]
+
+
+def _axis_score(X: FloatArray, off: FloatArray, side: float, A: FloatArray) -> FloatArray:
+    """Geometric residual sum of squares of the offset circle fit for each axis row of ``A``."""
+    E = np.eye(3)[np.argmin(np.abs(A), axis=1)]
+    U = np.cross(A, E)
+    U /= np.linalg.norm(U, axis=1, keepdims=True)
+    V = np.cross(A, U)
+    x = X @ U.T
+    y = X @ V.T
+    M = np.stack([2 * x, 2 * y, np.ones_like(x)], axis=2)
+    MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(3)
+    Mty = np.einsum("nki,nk->ki", M, x * x + y * y)
+    sol = np.linalg.solve(MtM, Mty[..., None])[..., 0]
+    rho = np.sqrt((x - sol[:, 0]) ** 2 + (y - sol[:, 1]) ** 2)
+    r = np.mean(rho - side * off[:, None], axis=0)
+    res = rho - side * off[:, None] - r
+    score = np.sum(res * res, axis=0)
+    score[~np.isfinite(score) | (r <= 0)] = np.inf
+    return score
+
+
+_LOCAL = np.random.default_rng(0).standard_normal((120, 3))
+
+
+def _refine_axis(X: FloatArray, off: FloatArray, side: float, axis: FloatArray) -> FloatArray:
+    """Local refinement of a sampled axis: shrinking random perturbations (the 400-direction
+    lattice is ~5 degrees apart, too coarse for a seed's inlier test)."""
+    best = axis
+    best_s = float(_axis_score(X, off, side, best[None])[0])
+    for step in (0.06, 0.02, 0.007, 0.0025, 0.0008):
+        C = best[None] + step * _LOCAL
+        C /= np.linalg.norm(C, axis=1, keepdims=True)
+        sc = _axis_score(X, off, side, C)
+        k = int(np.argmin(sc))
+        if sc[k] < best_s:
+            best, best_s = C[k], float(sc[k])
+    return best
+
+
 def _cyl_init(ctx: InitContext) -> list[FloatArray]:
-    return [_cyl_from_axis(ctx, a) for a in _axis_candidates(ctx)]
+    return [_cyl_from_axis(ctx, a) for a in [*_scan_axes(ctx), *_axis_candidates(ctx)]]
+
+
+def _cyl_quick(ctx: InitContext) -> list[FloatArray]:
+    return [_cyl_from_axis(ctx, a) for a in _scan_axes(ctx, keep=1)]
 
 
 _register(Model(
@@ -402,7 +503,7 @@ _register(Model(
     to_params=_cyl_params,
     params=(ParamSpec("point", 3, "point"), ParamSpec("axis", 3, "direction"),
             ParamSpec("radius", 1, "length")),
-    init=_cyl_init, min_rank=2, starts=2,
+    init=_cyl_init, min_rank=2, starts=3, quick_init=_cyl_quick,
 ))
 
 

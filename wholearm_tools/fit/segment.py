@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.core import fit_primitive, residuals
+from wholearm_tools.fit.core import consensus, fit_primitive, free_space_violation, residuals
 from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.result import FitResult
@@ -103,6 +103,24 @@ def _rms_dof(fit: FitResult) -> float:
     return float(np.sqrt(np.sum(r * r) / max(len(r) - dof, 1)))
 
 
+def _noise_estimate(best: np.ndarray, calibrated: bool) -> float:
+    """Noise level from the best dof-corrected RMS of each seed, ``(K,)``.
+
+    A seed of ``dof + 2`` contacts inside one surface has RMS ``sigma * sqrt(chi2_2 / 2)``:
+    its 10th percentile is ``0.325 sigma`` and the best of K seeds sits near the 1/K quantile
+    ``sqrt(-ln(1 - 1/K)) sigma``.  Both estimates agree within a small factor when the seeds
+    are clean; when most seeds straddle two surfaces (next to a junction) the percentile
+    measures the mismatch, and the best seed is used instead (the second look after selection
+    raises an estimate that is too low)."""
+    if best.size == 0:
+        return 0.0
+    if not calibrated:
+        return float(np.percentile(best, 10))
+    pct = float(np.percentile(best, 10)) / 0.325
+    low = float(np.min(best)) / math.sqrt(-math.log(1.0 - 1.0 / max(best.size, 2)))
+    return pct if pct <= 3.0 * low else low
+
+
 def _farthest_points(X: np.ndarray, k: int, rng: np.random.Generator) -> list[int]:
     n = len(X)
     first = int(rng.integers(n))
@@ -129,10 +147,12 @@ def segment(
     min_support: int | None = None,
     seed_accept: float = 2.5,
     seed_max_iter: int = 60,
+    trim_extra: int = 7,
     noise_floor: float = 0.0,
     min_radius: float = 0.0,
     max_radius_ratio: float = 50.0,
     max_rel_std: float = 0.2,
+    max_free_violation: float = 0.25,
     rng: int | np.random.Generator | None = 0,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
@@ -154,6 +174,9 @@ def segment(
         Contacts per seed region; default ``dof + 2`` of each type.
     max_seeds : int
         Number of seed regions.
+    trim_extra : int
+        Seeds that fit poorly start this many contacts larger and drop their worst contact
+        until they fit or reach the seed size (mixed neighbourhoods next to an intersection).
     neighbours : int
         Neighbours per contact in the adjacency graph used for growth.
     min_support : int or None
@@ -169,6 +192,9 @@ def segment(
     max_rel_std : float
         Largest standard deviation of the worst-determined parameter combination, in units of
         the support's spread, at noise ``max(sigma, 1e-4 x scene size)``.
+    max_free_violation : float
+        Largest fraction of the free-space hints next to a primitive's contacts that may lie on
+        its occupied side (see :func:`~wholearm_tools.fit.core.free_space_violation`).
     rng : seed or Generator
         Picks the first seed; the result is deterministic for a given seed.
 
@@ -207,31 +233,78 @@ def segment(
         return int(min_support or MODELS[kind].dof + 2)
 
     # ---- seed fits
+    # cheap types first; the costly ones (cone, torus) are tried at a seed only when no cheaper
+    # type explains it (they fit almost anything small and are the slowest solves)
+    cheap = tuple(k for k in kinds if MODELS[k].dof <= 5) or kinds
+    costly = tuple(k for k in kinds if k not in cheap)
+
+    def seed_fit(s: int, kind: str, trim: int) -> tuple[np.ndarray, FitResult]:
+        """Fit ``kind`` to the contacts nearest ``s``, starting ``trim`` contacts larger than
+        the seed size and dropping the worst-fitting contact (never ``s``) while the fit is
+        poor: near the intersection of two surfaces the nearest contacts mix both."""
+        size = seed_sizes[kind]
+        members = np.sort(order[s, :size])
+        if trim and trim_ok:
+            nb = np.sort(order[s, :min(size + trim, n)])
+            inl = consensus(kind, data.take(nb), int(np.flatnonzero(nb == s)[0]),
+                            ransac_tol, rng)
+            if len(inl) >= size:
+                members = nb[inl]
+        if len(members) <= MODELS[kind].dof:
+            return members, fit_primitive(kind, data.take(members[:0]))
+        f = fit_primitive(kind, data.take(members), max_iter=seed_max_iter)
+        while (trim_ok and len(members) > size and f
+               and _rms_dof(f) > seed_accept * sigma_seed):
+            r = np.abs(f.residuals)
+            r[members == s] = -1.0
+            keep = np.delete(members, int(np.argmax(r)))
+            g = fit_primitive(kind, data.take(keep), max_iter=seed_max_iter,
+                              free_side=f.free_side, initial=f.params)
+            if not g:
+                g = fit_primitive(kind, data.take(keep), max_iter=seed_max_iter)
+            if not g:
+                break
+            members, f = keep, g
+        return members, f
+
+    def seeds_at(points: list[int], trim: int) -> list[list[tuple[str, np.ndarray, FitResult]]]:
+        out = []
+        for s in points:
+            fits = [(k, *seed_fit(s, k, trim)) for k in cheap]
+            # (only in the consensus pass: before it, most seeds next to an intersection
+            # straddle two surfaces, and a torus fits almost any such small mix)
+            if costly and trim and not any(f and _rms_dof(f) <= seed_accept * sigma_seed
+                                           for _, _, f in fits):
+                fits += [(k, *seed_fit(s, k, 0)) for k in costly]
+            out.append(fits)
+        return out
+
+    # first pass (untrimmed) gives the noise estimate
+    trim_ok = False
+    sigma_seed = np.inf
     seeds = _farthest_points(X, max_seeds, rng)
-    seed_fits: list[list[tuple[np.ndarray, FitResult]]] = []
-    for s in seeds:
-        fits = []
-        for k in kinds:
-            members = np.sort(order[s, :seed_sizes[k]])
-            fits.append((members, fit_primitive(k, data.take(members), max_iter=seed_max_iter)
-                         if len(members) > MODELS[k].dof else
-                         fit_primitive(k, data.take(members[:0]))))
-        seed_fits.append(fits)
+    seed_fits = seeds_at(seeds, 0)
 
     if noise is None:
-        best = [min((_rms_dof(f) for _, f in fits if f), default=np.inf) for fits in seed_fits]
+        best = [min((_rms_dof(f) for _, _, f in fits if f), default=np.inf)
+                for fits in seed_fits]
         finite = np.array([b for b in best if np.isfinite(b)])
         # seeds have dof + 2 contacts: the dof-corrected RMS of a seed inside one surface is
         # sigma * sqrt(chi2_2 / 2), whose 10th percentile is sqrt(-ln 0.9) = 0.325 sigma (a low
-        # quantile: in sparse scenes most seeds straddle two surfaces)
-        q = 0.325 if seed_size is None else 1.0
-        est = float(np.percentile(finite, 10)) / q if finite.size else 0.0
+        # quantile: in sparse scenes most seeds straddle two surfaces; the consensus pass
+        # below lowers the estimate when nearly all of them do, as next to a junction)
+        est = _noise_estimate(finite, seed_size is None)
         sigma = max(est, float(noise_floor), 1e-6 * extent)
     else:
         sigma = float(noise)
     sigma_id = max(sigma, 1e-4 * extent)
+    sigma_seed = sigma
+    trim_ok = True
+    # inlier tolerance of the algebraic (RANSAC) seed guesses: well above the noise, well
+    # below the misfit of a contact from another surface or with the wrong label
+    ransac_tol = max(10.0 * k_sigma * sigma, 1e-3 * extent)
 
-    def admissible(fit: FitResult) -> bool:
+    def admissible(fit: FitResult, members: np.ndarray | None = None) -> bool:
         """Radii in range and every degree of freedom constrained by the support."""
         if not fit:
             return False
@@ -239,7 +312,17 @@ def segment(
             r = float(fit.params[name])
             if r < min_radius or r > max_radius_ratio * fit.scale:
                 return False
-        return fit.sensitivity * sigma_id <= max_rel_std
+        if fit.sensitivity * sigma_id > max_rel_std:
+            return False
+        if (noise_floor > 0 and len(fit.link_residuals) >= len(fit.tip_residuals)
+                and fit.n_contacts > MODELS[fit.kind].dof + 1
+                and _rms_dof(fit) < 1e-3 * noise_floor):
+            # measured contacts carry encoder noise; link contacts fitted a thousand times
+            # tighter are an identity of the kinematics (one link's axis always tangent to a
+            # sphere about an inner joint), not a surface
+            return False
+        return members is None or free_space_violation(
+            fit.kind, fit.params, fit.free_side, data.take(members)) <= max_free_violation
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
         return residuals(kind, fit.params, data, fit.free_side) / sigma
@@ -264,7 +347,7 @@ def segment(
             if not refit or _rms_dof(refit) > 2.0 * sigma:
                 break
             fit, members = refit, new
-        if members.size < min_sup(kind) or not admissible(fit):
+        if members.size < min_sup(kind) or not admissible(fit, members):
             return None
         return _Hyp(kind, fit, members)
 
@@ -272,21 +355,53 @@ def segment(
     hyps: list[_Hyp] = []
     seen: set[tuple[str, bytes]] = set()
     covered = np.zeros(n, dtype=bool)
-    for s, fits in zip(seeds, seed_fits, strict=True):
-        if covered[s]:
-            continue
-        for kind, (members, f) in zip(kinds, fits, strict=True):
-            if not f or _rms_dof(f) > seed_accept * sigma:
+
+    def grow_all(seeds: list[int], seed_fits: list) -> None:
+        for s, fits in zip(seeds, seed_fits, strict=True):
+            if covered[s]:
                 continue
-            h = grow(kind, f, members)
-            if h is None:
-                continue
-            key = (kind, h.members.tobytes())
-            if key in seen:
-                continue
-            seen.add(key)
-            hyps.append(h)
-            covered[h.members] = True
+            for kind, members, f in fits:
+                if not f or _rms_dof(f) > seed_accept * sigma:
+                    continue
+                h = grow(kind, f, members)
+                if h is None:
+                    continue
+                key = (kind, h.members.tobytes())
+                if key in seen:
+                    continue
+                seen.add(key)
+                hyps.append(h)
+                covered[h.members] = True
+
+    # seeds the first pass could not use are refitted with trimming (mixed neighbourhoods)
+    redo = [i for i, fits in enumerate(seed_fits)
+            if not any(f and _rms_dof(f) <= seed_accept * sigma for _, _, f in fits)]
+    if redo:
+        again = seeds_at([seeds[i] for i in redo], trim_extra)
+        for i, fits in zip(redo, again, strict=True):
+            seed_fits[i] = fits
+        if noise is None:
+            # the consensus seeds are often the only clean ones: lower the estimate to them
+            best = [min((_rms_dof(f) for _, _, f in fits if f), default=np.inf)
+                    for fits in seed_fits]
+            finite = np.array([b for b in best if np.isfinite(b)])
+            if finite.size:
+                sigma = max(min(sigma, _noise_estimate(finite, seed_size is None)),
+                            float(noise_floor),
+                            1e-6 * extent)
+                sigma_id = max(sigma, 1e-4 * extent)
+    grow_all(seeds, seed_fits)
+    # second round: seeds among the contacts no hypothesis covers (a second surface whose
+    # contacts the farthest-point seeds missed, e.g. a lateral branch next to a main bore)
+    for _ in range(2):
+        left = np.flatnonzero(~covered)
+        if left.size < min(seed_sizes.values()):
+            break
+        extra = [int(left[i]) for i in _farthest_points(X[left], max_seeds // 2, rng)]
+        n_before = len(hyps)
+        grow_all(extra, seeds_at(extra, trim_extra))
+        if len(hyps) == n_before:
+            break
 
     # ---- selection by description length
     c_unexplained = math.log(max(extent / sigma, math.e))
@@ -331,11 +446,19 @@ def segment(
             if MODELS[k].dof >= MODELS[h.kind].dof:
                 continue
             f = refit_on(k, h.members, None)
-            if admissible(f) and (d_ := dl(k, f, h.members)) <= best_dl:
+            if admissible(f, h.members) and (d_ := dl(k, f, h.members)) <= best_dl:
                 best, best_dl = _Hyp(k, f, h.members), d_
         return best
 
     final = [simplest(hyps[k]) for k in chosen]
+    if noise is None and final:
+        # second look at the noise level, before merging: the residuals of the contacts the
+        # selected primitives explain (the seed estimate is biased low: best seed of several
+        # types)
+        r = np.concatenate([residuals(h.kind, h.fit.params, data, h.fit.free_side)[h.members]
+                            for h in final])
+        sigma = max(sigma, 1.4826 * float(np.median(np.abs(r))))
+        sigma_id = max(sigma, 1e-4 * extent)
     merged = True
     while merged and len(final) > 1:  # two primitives where one explains the data -> one
         merged = False
@@ -347,7 +470,7 @@ def segment(
                 for k in dict.fromkeys(sorted((hi_.kind, hj.kind), key=lambda k: MODELS[k].dof)):
                     prev = hi_.fit if hi_.kind == k else hj.fit
                     f = refit_on(k, union, prev)
-                    if admissible(f) and dl(k, f, union) < base:
+                    if admissible(f, union) and dl(k, f, union) < base:
                         final = [h for m_, h in enumerate(final) if m_ not in (i, j)]
                         final.append(_Hyp(k, f, union))
                         merged = True
@@ -357,12 +480,6 @@ def segment(
             if merged:
                 break
 
-    if noise is None and final:
-        # second look at the noise level: the residuals of the contacts the selected primitives
-        # explain (the seed estimate is biased low: best of several types on tiny seeds)
-        r = np.concatenate([residuals(h.kind, h.fit.params, data, h.fit.free_side)[h.members]
-                            for h in final])
-        sigma = max(sigma, 1.4826 * float(np.median(np.abs(r))))
     assignment = np.full(n, -1)
     for _ in range(2):
         if not final:
@@ -377,9 +494,9 @@ def segment(
             if idx.size < min_sup(h.kind):
                 continue
             refit = refit_on(h.kind, idx, h.fit)
-            if admissible(refit):
+            if admissible(refit, idx):
                 kept.append(_Hyp(h.kind, refit, idx))
-            elif admissible(h.fit):
+            elif admissible(h.fit, idx):
                 kept.append(_Hyp(h.kind, h.fit, idx))
         final = kept
     if final:
