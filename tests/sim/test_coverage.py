@@ -53,17 +53,17 @@ def _default_run_coverage(name: str) -> tuple[list, dict[str, int]]:
     return surface_coverage(res.truth), kind_counts(res.truth)
 
 
-def test_lab_circle_default_run_touches_every_surface() -> None:
-    (circle, top, left), kinds = _default_run_coverage("lab_circle")
-    assert circle.count >= 20
+def test_lab_circle_default_run_covers_every_surface() -> None:
+    (circle, top, left), kinds = _default_run_coverage("lab_circle")  # 120 s, seed 0
+    assert circle.count >= 25
     assert circle.tip >= 8
-    assert circle.body >= 8
+    assert circle.body >= 15
     assert circle.arc is not None
-    assert circle.arc >= 90
-    assert top.count >= 6
+    assert circle.arc >= 120
+    assert top.count >= 10
     assert left.count >= 10
-    assert kinds["tip"] >= 12
-    assert kinds["body"] >= 10
+    assert kinds["tip"] >= 30
+    assert kinds["body"] >= 20
 
 
 def test_frontier_unhook_puts_joints_back_outermost_first() -> None:
