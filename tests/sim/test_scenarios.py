@@ -74,7 +74,7 @@ def test_malformed_urdf_names_the_file(tmp_path: Path) -> None:
 def test_home_in_collision_is_refused(tmp_path: Path) -> None:
     path = _copy(tmp_path, "lab_circle")
     text = path.read_text(encoding="utf-8")
-    text = "\n".join("home: [0.3, 0.0]" if line.startswith("home:") else line
+    text = "\n".join("home: [0.56, 0.0]" if line.startswith("home:") else line
                      for line in text.splitlines())
     path.write_text(text, encoding="utf-8")
     with pytest.raises(ScenarioError, match="in collision"):
