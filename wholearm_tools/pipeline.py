@@ -6,6 +6,7 @@ it reads nothing and writes nothing (see ``write_reconstruction`` for the output
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -232,13 +233,42 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         else:
             messages.append("no primitive both explains enough contacts and is determined by "
                             "them (supports too small, degenerate or not converging)")
+    # a link contact whose least clearance lies at the link's outer end touched with the
+    # sphere there: it is a tip contact (tip radius, not link radius) whatever its label
+    seg_rows = np.full(len(table), -1, dtype=np.int64)
+    seg_rows[order] = seg.assignment
+    flip = np.zeros(len(table), dtype=bool)
+    for k, fit in enumerate(seg.primitives):
+        links = seg.members(k)
+        links = links[links >= data.n_tip]
+        if fit.primitive is None or links.size == 0:
+            continue
+        li = links - data.n_tip
+        _, t = fit.primitive.segment_signed_distance(data.link_a[li], data.link_b[li],
+                                                     free_side=fit.free_side)
+        rows = order[links[np.asarray(t) >= 1.0 - 1e-6]]
+        flip[rows[table.tip_radius[rows] != table.link_radius[rows]]] = True
+    flip = np.isin(group, group[flip]) & ~table.used_as_tip
+    refit_needed: set[int] = set()
+    if np.any(flip):
+        refit_needed = set(seg_rows[flip].tolist())
+        messages.append(f"{int(np.sum(flip))} link contacts touching with the link's outer "
+                        "end used as tip contacts")
+        table = dataclasses.replace(table, used_as_tip=table.used_as_tip | flip)
+        data, order = fit_data_from_table(table, free_points, rows=reps)
+    assign_fit = seg_rows[order]  # primitive of each fit contact, in the (new) fit order
     assignment = np.full(len(table), -1, dtype=np.int64)
     residual = np.full(len(table), np.nan)
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
     n_tip = data.n_tip
     for k, fit in enumerate(seg.primitives):
-        members = seg.members(k)  # sorted: tips first, then links
+        members = np.flatnonzero(assign_fit == k)  # sorted: tips first, then links
+        if k in refit_needed:
+            again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side,
+                                  initial=dict(fit.params))
+            if again:
+                fit = again
         if loss != "linear":
             # final refit of the segment with the robust loss, so contacts that the
             # classification got wrong pull less on the parameters

@@ -121,6 +121,55 @@ def _noise_estimate(best: np.ndarray, calibrated: bool) -> float:
     return pct if pct <= 3.0 * low else low
 
 
+#: noise estimates never exceed this multiple of the encoder floor while the best seeds fit at
+#: (twice) the floor: a few mixed seeds next to a junction must not widen the tolerances until
+#: one bore's hypothesis swallows the other's contacts
+FLOOR_CAP = 2.5
+
+
+def _floor_cap(noise_floor: float, low: float) -> float:
+    """Upper bound of sigma: ``FLOOR_CAP x noise_floor`` when the best-seed estimate ``low``
+    is within twice the floor, else none."""
+    if noise_floor > 0 and low <= 2.0 * noise_floor:
+        return FLOOR_CAP * noise_floor
+    return math.inf
+
+
+def _truncated_sigma(r: np.ndarray, start: float, k: float, rounds: int = 30) -> float:
+    """Noise level from residuals ``r`` of which only those within ``k sigma`` are inliers:
+    the fixed point of ``sigma = rms(r[|r| <= k sigma]) / sqrt(c(k))``, where ``c(k)`` is the
+    variance ratio of a normal truncated at ``k`` (so the gate does not bias the estimate low,
+    as a MAD of the gated residuals does).  Starts at ``start``; contacts of other surfaces,
+    far outside the gate, do not count."""
+    r = np.abs(np.asarray(r, dtype=float))
+    r = r[np.isfinite(r)]
+    if r.size == 0 or not start > 0:
+        return float(start)
+    phi = math.exp(-0.5 * k * k) / math.sqrt(2 * math.pi)
+    mass = math.erf(k / math.sqrt(2))
+    ratio = 1.0 - 2.0 * k * phi / mass
+    s = float(start)
+    for _ in range(rounds):
+        inl = r[r <= k * s]
+        if inl.size < 3:
+            break
+        nxt = math.sqrt(float(np.mean(inl * inl)) / ratio)
+        if not nxt > 0:
+            break
+        if abs(nxt - s) <= 1e-6 * s:
+            s = nxt
+            break
+        s = nxt
+    return s
+
+
+def _best_seed_sigma(best: np.ndarray) -> float:
+    """Noise level implied by the best seed alone (its RMS sits near the ``1/K`` quantile)."""
+    if best.size == 0:
+        return math.inf
+    return float(np.min(best)) / math.sqrt(-math.log(1.0 - 1.0 / max(best.size, 2)))
+
+
 def _farthest_points(X: np.ndarray, k: int, rng: np.random.Generator) -> list[int]:
     n = len(X)
     first = int(rng.integers(n))
@@ -294,9 +343,12 @@ def segment(
         # quantile: in sparse scenes most seeds straddle two surfaces; the consensus pass
         # below lowers the estimate when nearly all of them do, as next to a junction)
         est = _noise_estimate(finite, seed_size is None)
-        sigma = max(est, float(noise_floor), 1e-6 * extent)
+        sigma_seed_low = _best_seed_sigma(finite)
+        sigma = max(min(est, _floor_cap(noise_floor, sigma_seed_low)), float(noise_floor),
+                    1e-6 * extent)
     else:
         sigma = float(noise)
+        sigma_seed_low = math.inf
     sigma_id = max(sigma, 1e-4 * extent)
     sigma_seed = sigma
     trim_ok = True
@@ -320,6 +372,12 @@ def segment(
             # measured contacts carry encoder noise; link contacts fitted a thousand times
             # tighter are an identity of the kinematics (one link's axis always tangent to a
             # sphere about an inner joint), not a surface
+            return False
+        if 2 * int(np.sum(fit.link_t <= 1e-6)) > fit.n_contacts:
+            # most of the support are link contacts touching at their inner end: that point
+            # is the joint the link turns about, which does not move when the link turns, so
+            # a contact there would have stopped the previous link, not this one (an artefact:
+            # a line through the elbow positions of tangent link contacts)
             return False
         return members is None or free_space_violation(
             fit.kind, fit.params, fit.free_side, data.take(members)) <= max_free_violation
@@ -386,7 +444,9 @@ def segment(
                     for fits in seed_fits]
             finite = np.array([b for b in best if np.isfinite(b)])
             if finite.size:
-                sigma = max(min(sigma, _noise_estimate(finite, seed_size is None)),
+                sigma_seed_low = min(sigma_seed_low, _best_seed_sigma(finite))
+                sigma = max(min(sigma, _noise_estimate(finite, seed_size is None),
+                                _floor_cap(noise_floor, sigma_seed_low)),
                             float(noise_floor),
                             1e-6 * extent)
                 sigma_id = max(sigma, 1e-4 * extent)
@@ -455,9 +515,10 @@ def segment(
         # second look at the noise level, before merging: the residuals of the contacts the
         # selected primitives explain (the seed estimate is biased low: best seed of several
         # types)
-        r = np.concatenate([residuals(h.kind, h.fit.params, data, h.fit.free_side)[h.members]
-                            for h in final])
-        sigma = max(sigma, 1.4826 * float(np.median(np.abs(r))))
+        R = np.min(np.stack([np.abs(residuals(h.kind, h.fit.params, data, h.fit.free_side))
+                             for h in final]), axis=0)
+        sigma = max(_truncated_sigma(R, sigma, k_sigma), float(noise_floor), 1e-6 * extent)
+        sigma = min(sigma, _floor_cap(noise_floor, sigma_seed_low))
         sigma_id = max(sigma, 1e-4 * extent)
     merged = True
     while merged and len(final) > 1:  # two primitives where one explains the data -> one
