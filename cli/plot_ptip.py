@@ -33,7 +33,7 @@ def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | No
     import numpy as np
 
     from wholearm_tools._io import atomic_output
-    from wholearm_tools.classify import swept_map, tip_probability_history
+    from wholearm_tools.classify import ClassifyParams, swept_map, tip_probability_history
     from wholearm_tools.contacts import detect_contacts, match_truth
     from wholearm_tools.logs import read_run
 
@@ -65,7 +65,9 @@ def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | No
         ax.plot([contacts.t[k]], [hist[k, live][0] if live.any() else np.nan], "o", ms=3,
                 color=color)
         ax.plot([times[-1]], [hist[k, -1]], "s", ms=4, color=color)
-    ax.axhspan(0.3, 0.7, color="0.9", zorder=0, label="ambiguous")
+    band = ClassifyParams()
+    ax.axhspan(band.link_threshold, band.tip_threshold, color="0.9", zorder=0,
+               label="ambiguous")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("tip probability $P_T$")
     ax.set_ylim(-0.03, 1.03)

@@ -27,6 +27,9 @@ def run():
     return simulate(robot, obstacles, duration=60, seed=0, home=[0.2, 0.6, 0.4]).run
 
 
+LINK_MIN = {"lab_circle": 0.95, "well_junction": 0.8}
+
+
 def test_links_are_identified(run):
     c = detect_contacts(run.log, run.robot)
     m = match_truth(c, run.truth)
@@ -36,22 +39,46 @@ def test_links_are_identified(run):
     assert len(set(m.tolist())) == run.truth.n_contacts, "no true contact is missed"
 
 
-@pytest.mark.xfail(reason="inner-link joint-sphere contacts get P_T ~ 0.1 since the simulator's "
-                   "single-joint moves (known open issue, docs/method.md)", strict=False)
 def test_labels_agree_with_truth_and_offline_beats_causal(run):
+    """Tip and body contacts are labelled right and offline P_T is closer to the truth than
+    causal.  Joint-sphere contacts of the inner link (kind ``joint``) are *not* asserted: eq. (2)
+    gives them P_T ~ 0.1 on this run (the body ahead of link 0 is never swept, so the map cannot
+    rule it out) — the open issue in docs/method.md."""
     B = 0.02
     c = detect_contacts(run.log, run.robot)
     m = match_truth(c, run.truth)
     truth_tip = run.truth.is_tip[m]
+    kind = np.asarray(run.truth.contact_kind)[m]
     grid = swept_map(run.robot, run.log.q, B=B)
     off = tip_probability(run, c, B, grid=grid)
     cau = tip_probability(run, c, B, grid=grid, causal=True)
     for cl in (off, cau):
         assert np.all((cl.p_tip >= 0) & (cl.p_tip <= 1))
         assert np.all(cl.variance > 0)
-    labelled = off.label != "ambiguous"
-    assert labelled.mean() >= 0.75
-    assert np.mean((off.label == "tip")[labelled] == truth_tip[labelled]) >= 0.85
+    plain = kind != "joint"
+    assert plain.sum() >= 6
+    labelled = plain & (off.label != "ambiguous")
+    assert labelled.sum() >= 0.9 * plain.sum()
+    assert np.all((off.label == "tip")[labelled] == truth_tip[labelled])
     err_off = np.mean(np.abs(off.p_tip - truth_tip))
     err_cau = np.mean(np.abs(cau.p_tip - truth_tip))
     assert err_off < err_cau
+
+
+@pytest.mark.parametrize("name", ["lab_circle", "well_junction"])
+def test_bundled_scenario_short_run(name):
+    """A short run of a bundled scenario: every true contact found, links and labels mostly
+    right (the benchmark measures the full-length numbers)."""
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    run = load_scenario(name).simulate(seed=0, duration=20).run
+    B = 0.02
+    c = detect_contacts(run.log, run.robot)
+    m = match_truth(c, run.truth)
+    assert len(c) >= 5
+    assert np.all(m >= 0)
+    assert np.mean(c.link == run.truth.contact_link[m]) >= LINK_MIN[name]
+    off = tip_probability(run, c, B)
+    labelled = off.label != "ambiguous"
+    truth_tip = run.truth.is_tip[m]
+    assert np.mean((off.label == "tip")[labelled] == truth_tip[labelled]) >= 0.85

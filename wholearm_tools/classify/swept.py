@@ -202,6 +202,44 @@ def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
     res = float(resolution) if resolution is not None else default_resolution(robot, B, hi - lo)
     if not res > 0:
         raise InputError(f"resolution must be > 0, got {resolution}")
+    cached = _cache_get(q, robot, res, lo, hi)
+    if cached is not None:
+        return cached
+    smap = _build(robot, q, pts, parts, lo, hi, res)
+    _cache_put(q, robot, smap)
+    return smap
+
+
+#: recently built maps: (robot, fingerprint of q, map).  Detection (rigid groups) and the
+#: classification of the same log ask for the same map; building it twice would double the cost.
+_CACHE: list[tuple[RobotModel, tuple[object, ...], SweptMap]] = []
+_CACHE_SIZE = 2
+
+
+def _fingerprint(q: FloatArray) -> tuple[object, ...]:
+    return (q.shape, hash(np.ascontiguousarray(q).tobytes()))
+
+
+def _cache_get(q: FloatArray, robot: RobotModel, res: float, lo: FloatArray, hi: FloatArray
+               ) -> SweptMap | None:
+    """A cached map of the same robot and trajectory, same cell size, covering ``lo..hi``."""
+    key = _fingerprint(q)
+    for crobot, ckey, smap in _CACHE:
+        if crobot is robot and ckey == key and abs(smap.resolution - res) <= 1e-12 * res:
+            top = smap.origin + (np.array(smap.first.shape) - 1) * res
+            if np.all(smap.origin <= lo + 1e-12) and np.all(top >= hi - 1e-12):
+                return smap
+    return None
+
+
+def _cache_put(q: FloatArray, robot: RobotModel, smap: SweptMap) -> None:
+    _CACHE.insert(0, (robot, _fingerprint(q), smap))
+    del _CACHE[_CACHE_SIZE:]
+
+
+def _build(robot: RobotModel, q: FloatArray, pts: FloatArray,
+           parts: list[tuple[int, int, float]], lo: FloatArray, hi: FloatArray, res: float
+           ) -> SweptMap:
     shape = tuple(int(s) for s in np.ceil((hi - lo) / res).astype(int) + 1)
     first = np.full(shape, NEVER, dtype=np.int32)
     smap = SweptMap(lo, res, first, int(q.shape[0]))

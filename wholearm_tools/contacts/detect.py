@@ -72,10 +72,17 @@ class DetectionParams:
         (tiny) noise yet far below the motion level.
     rigid_outer : bool
         When the joints beyond the stopped link were at rest and unloaded (a single-joint
-        move), assign the contact to the outermost link of that rigid group instead of the
-        innermost (see :func:`_extend_rigid`).  On by default: on the bundled scenarios it
-        lifts link identification from 48-85 % to 80-100 %; it still misnames inner-link body
-        contacts made during single-joint moves (well_junction).
+        move), links ``n..m`` moved as one rigid body and the joint signals cannot tell which
+        touched.  True (default): choose within that group (see ``rigid_choice``); False: keep
+        the innermost link ``n``.
+    rigid_choice : str
+        ``"map"`` (default; needs ``robot``): the link of the group whose dilated boundary
+        sweeps the most admissible space, eq. (2)'s integral over each candidate link with the
+        whole run's swept map (see :func:`_choose_rigid`); ``"outer"``: the outermost link
+        (the map-free prior; also used when no robot is given).
+    rigid_dilation : float
+        Dilation [m] used by the ``"map"`` choice (the map is cached, so classifying at the same
+        B reuses it).
     velocity_threshold, torque_threshold : float or (n,) float, optional
         Absolute overrides of the noise-derived thresholds.
     """
@@ -88,6 +95,8 @@ class DetectionParams:
     before_time: float = 0.02
     motion_torque_fraction: float = 0.2
     rigid_outer: bool = True
+    rigid_choice: str = "map"
+    rigid_dilation: float = 0.02
     velocity_threshold: Any = None
     torque_threshold: Any = None
 
@@ -97,6 +106,12 @@ class DetectionParams:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be a finite non-negative number, got {value!r}")
+        if self.rigid_choice not in ("map", "outer"):
+            raise InputError("rigid_choice must be 'map' or 'outer', got "
+                             f"{self.rigid_choice!r}")
+        if not (np.isfinite(self.rigid_dilation) and self.rigid_dilation > 0):
+            raise InputError("rigid_dilation must be a positive length, got "
+                             f"{self.rigid_dilation!r}")
         if self.min_stop_samples < 1:
             raise InputError(f"min_stop_samples must be >= 1, got {self.min_stop_samples}")
 
@@ -339,6 +354,33 @@ def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
     return out
 
 
+def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
+                  groups: list[tuple[int, int]], B: float) -> list[int]:
+    """Link of each rigid group ``lo..hi`` that most likely touched, from geometry and the map.
+
+    Eq. (2)'s reasoning applied across links: the chance that link ``k`` made the contact is
+    proportional to ``∫ (n·v)+ P_C`` over its dilated boundary (side and outer sphere, exposed
+    part only) at the contact pose, with ``P_C`` from the whole run's swept map — space the arm
+    swept at any time (before or after) cannot hold the surface that stopped it.  ``q, qd`` are
+    ``(G, n)`` (one row per group).  Returns the argmax of each group; its outermost link when
+    the map rules everything out (an assumption violated).
+    """
+    from wholearm_tools.classify.swept import swept_map
+    from wholearm_tools.classify.tip import ClassifyParams, _boundary
+
+    grid = swept_map(robot, q_all, B=B)
+    rows = np.concatenate([np.full(hi - lo + 1, g) for g, (lo, hi) in enumerate(groups)])
+    cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
+    bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
+    tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
+    mass = (bd.flux * (tmin >= grid.n_samples)).sum(1)
+    out = []
+    for g, (_lo, hi) in enumerate(groups):
+        sel = rows == g
+        out.append(int(cand[sel][np.argmax(mass[sel])]) if np.any(mass[sel] > 0) else hi)
+    return out
+
+
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
                      blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
                      qd_s: FloatArray, v_th: FloatArray) -> list[tuple[int, int, int]]:
@@ -436,8 +478,11 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         if cur > prev and cur >= 0 and s > 0:
             rows.append((int(s), int(e), cur))
         prev = cur
+    inner: dict[int, int] = {}  # start sample -> innermost link of its rigid group
     if params.rigid_outer:
-        rows = _extend_rigid(rows, stopped, loaded, max(2, round(params.before_time / dt)))
+        ext = _extend_rigid(rows, stopped, loaded, max(2, round(params.before_time / dt)))
+        inner = {r[0]: r[2] for r in rows}
+        rows = ext
     rows = _split_two_stage(rows, labels, stopped & loaded, stopped,
                             max(2, round(params.smooth_time / dt)) + 1, qd_s, v_th)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": sigma_tau.tolist(),
@@ -468,5 +513,11 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         out_qd[i] = qd[lo:hi].mean(axis=0)
         at_rest = np.all(stopped[lo:hi], axis=0)  # already stopped before this contact
         out_qd[i, at_rest] = 0.0
-    return Contacts(log.t[idx], np.array([r[2] for r in rows]), idx, out_q, out_qd, t_end,
-                    v_th, tau_th, meta)
+    links = np.array([r[2] for r in rows])
+    if params.rigid_outer and params.rigid_choice == "map" and robot is not None:
+        which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
+        if which:
+            groups = [(inner[rows[i][0]], rows[i][2]) for i in which]
+            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which], groups,
+                                         params.rigid_dilation)
+    return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta)
