@@ -203,12 +203,53 @@ def _rank(points: np.ndarray) -> int:
 # --------------------------------------------------------------------------- numeric residuals
 
 
+def _ends_min(v0: np.ndarray, v1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smaller of the end values; t = 0.5 where they tie (a link lying along the surface)."""
+    tol = 1e-12 * (1.0 + np.maximum(np.abs(v0), np.abs(v1)))
+    t = np.where(v1 < v0 - tol, 1.0, np.where(v0 < v1 - tol, 0.0, 0.5))
+    return np.minimum(v0, v1), t
+
+
+def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Exact least clearance along segments for lines, planes, circles, spheres and cylinders
+    (None for the other types).  Lines and planes are linear along a segment, and the distance
+    to a centre (or an axis) is convex along it: seen from outside the minimum is the
+    projection of the centre (axis) onto the segment, seen from inside it is at an end."""
+    def clearance(p: np.ndarray) -> np.ndarray:
+        return side * signed_distance_np(m, th, p)
+
+    if m.linear:
+        v, t = _ends_min(clearance(a), clearance(b))
+        return v, t
+    if m.kind not in ("circle", "sphere", "cylinder"):
+        return None
+    d = b - a
+    if side < 0:
+        v, t = _ends_min(clearance(a), clearance(b))
+        return v, t
+    dim = m.dim
+    q0 = a - np.asarray(th[:dim], dtype=float)
+    if m.kind == "cylinder":
+        ax = np.asarray(th[3:6], dtype=float)
+        da, qa = d @ ax, q0 @ ax
+        A = np.einsum("ij,ij->i", d, d) - da * da
+        B = np.einsum("ij,ij->i", q0, d) - qa * da
+    else:
+        A = np.einsum("ij,ij->i", d, d)
+        B = np.einsum("ij,ij->i", q0, d)
+    t = np.clip(np.where(A > 1e-300, -B / np.maximum(A, 1e-300), 0.5), 0.0, 1.0)
+    return clearance(a + t[:, None] * d), t
+
+
 def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least clearance along each link: value, t and whether t is a smooth interior minimum."""
+    """Least clearance along each link: value, t and whether t is a smooth interior minimum
+    (closed form where the type has one, else sampling + golden section)."""
     def fn(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
-    val, t = segment_min(fn, a, b)
+    exact = _closed_form_min(m, th, side, a, b) if len(a) else None
+    val, t = exact if exact is not None else segment_min(fn, a, b)
     if m.linear or len(a) == 0:
         return val, t, np.zeros(len(a), dtype=bool)
     h = 1e-3
