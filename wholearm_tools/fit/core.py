@@ -865,4 +865,6 @@ def consensus(kind: str, data: FitData, anchor: int, tol: float, rng: np.random.
                 key = (len(inl), -float(np.sum(np.minimum(r, tol_n) ** 2)))
                 if key > best_key:
                     best, best_key = inl, key
+        if len(best) == n:  # every contact agrees: no trial can do better
+            break
     return best

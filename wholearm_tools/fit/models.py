@@ -410,8 +410,8 @@ def _hemisphere(n: int) -> FloatArray:
 _DIRECTIONS = _hemisphere(400)
 
 
-def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
-               ) -> list[FloatArray]:
+def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0,
+               quick: bool = False) -> list[FloatArray]:
     """Best cylinder axes by direction sampling: for each of 400 directions, the algebraic
     circle fit of the surface samples projected on the perpendicular plane, with the contact
     radii as offsets (``rho_i = r + side * w_i``), scored by the geometric residual; the best
@@ -447,6 +447,9 @@ def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
             break
         if all(abs(float(A[k] @ a)) < cos_min for a in out):
             out.append(A[k])
+    if quick:  # RANSAC hypotheses: a coarser refinement is plenty for an inlier test
+        return [_refine_axis(X, off, ctx.side, a, (0.06, 0.02, 0.007), _LOCAL[:40])
+                for a in out]
     return [_refine_axis(X, off, ctx.side, a) for a in out]
 
 
@@ -473,13 +476,15 @@ def _axis_score(X: FloatArray, off: FloatArray, side: float, A: FloatArray) -> F
 _LOCAL = np.random.default_rng(0).standard_normal((120, 3))
 
 
-def _refine_axis(X: FloatArray, off: FloatArray, side: float, axis: FloatArray) -> FloatArray:
+def _refine_axis(X: FloatArray, off: FloatArray, side: float, axis: FloatArray,
+                 steps: tuple[float, ...] = (0.06, 0.02, 0.007, 0.0025, 0.0008),
+                 local: FloatArray = _LOCAL) -> FloatArray:
     """Local refinement of a sampled axis: shrinking random perturbations (the 400-direction
     lattice is ~5 degrees apart, too coarse for a seed's inlier test)."""
     best = axis
     best_s = float(_axis_score(X, off, side, best[None])[0])
-    for step in (0.06, 0.02, 0.007, 0.0025, 0.0008):
-        C = best[None] + step * _LOCAL
+    for step in steps:
+        C = best[None] + step * local
         C /= np.linalg.norm(C, axis=1, keepdims=True)
         sc = _axis_score(X, off, side, C)
         k = int(np.argmin(sc))
@@ -493,7 +498,7 @@ def _cyl_init(ctx: InitContext) -> list[FloatArray]:
 
 
 def _cyl_quick(ctx: InitContext) -> list[FloatArray]:
-    return [_cyl_from_axis(ctx, a) for a in _scan_axes(ctx, keep=1)]
+    return [_cyl_from_axis(ctx, a) for a in _scan_axes(ctx, keep=1, quick=True)]
 
 
 _register(Model(
