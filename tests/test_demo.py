@@ -12,7 +12,7 @@ from wholearm_tools.mapfile import read_map
 def test_demo_writes_every_deliverable(tmp_path) -> None:
     out = tmp_path / "demo"
     result = CliRunner().invoke(cli, ["demo", "-o", str(out), "--scenario", "lab_circle",
-                                      "--duration", "20"])
+                                      "--duration", "60"])
     assert result.exit_code == 0, result.output
     for name in ("run.mcap", "map.json", "contacts.csv", "map.ply", "map.stl", "map.obj",
                  "map.glb", "map.vtp", "overlay.mcap", "report.pdf"):
