@@ -233,10 +233,22 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         else:
             messages.append("no primitive both explains enough contacts and is determined by "
                             "them (supports too small, degenerate or not converging)")
-    # a link contact whose least clearance lies at the link's outer end touched with the
-    # sphere there: it is a tip contact (tip radius, not link radius) whatever its label
     seg_rows = np.full(len(table), -1, dtype=np.int64)
     seg_rows[order] = seg.assignment
+    all_fits = list(seg.primitives)
+    # second look: unexplained contacts whose class is uncertain, as either class
+    extra, swap = _other_interpretation(table, reps, seg_rows, free_points, kinds, seg.noise,
+                                        noise_floor, B)
+    for k, (_, rows) in enumerate(extra):
+        seg_rows[np.isin(group, group[rows])] = len(all_fits) + k
+    all_fits += [fit for fit, _ in extra]
+    swap = np.isin(group, group[swap])
+    if extra:
+        messages.append(f"{len(extra)} primitive(s) found among unexplained contacts by trying "
+                        f"uncertain ones as the other class ({int(np.sum(swap))} contacts "
+                        "switched between tip and link)")
+    # a link contact whose least clearance lies at the link's outer end touched with the
+    # sphere there: it is a tip contact (tip radius, not link radius) whatever its label
     flip = np.zeros(len(table), dtype=bool)
     for k, fit in enumerate(seg.primitives):
         links = seg.members(k)
@@ -249,12 +261,13 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         rows = order[links[np.asarray(t) >= 1.0 - 1e-6]]
         flip[rows[table.tip_radius[rows] != table.link_radius[rows]]] = True
     flip = np.isin(group, group[flip]) & ~table.used_as_tip
-    refit_needed: set[int] = set()
+    refit_needed: set[int] = set(range(len(seg.primitives), len(all_fits)))
     if np.any(flip):
-        refit_needed = set(seg_rows[flip].tolist())
+        refit_needed |= set(seg_rows[flip].tolist())
         messages.append(f"{int(np.sum(flip))} link contacts touching with the link's outer "
                         "end used as tip contacts")
-        table = dataclasses.replace(table, used_as_tip=table.used_as_tip | flip)
+    if np.any(flip | swap):
+        table = dataclasses.replace(table, used_as_tip=table.used_as_tip ^ (flip | swap))
         data, order = fit_data_from_table(table, free_points, rows=reps)
     assign_fit = seg_rows[order]  # primitive of each fit contact, in the (new) fit order
     assignment = np.full(len(table), -1, dtype=np.int64)
@@ -262,7 +275,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
     n_tip = data.n_tip
-    for k, fit in enumerate(seg.primitives):
+    for k, fit in enumerate(all_fits):
         members = np.flatnonzero(assign_fit == k)  # sorted: tips first, then links
         if k in refit_needed:
             again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side,
@@ -310,6 +323,69 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                              contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
     table = table.with_assignment(assignment, residual)
     return surface_map, tuple(fits), table, tuple(messages)
+
+
+#: tip probabilities between these bounds make a contact's class uncertain enough for the
+#: second look of :func:`_other_interpretation`
+UNCERTAIN_P_TIP = (0.1, 0.9)
+
+
+def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
+                          free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
+                          noise_floor: float, B: float,
+                          ) -> tuple[list[tuple[Any, NDArray]], NDArray]:
+    """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
+    (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.
+
+    A misclassified contact fits no surface as labelled; offered both ways, a primitive
+    explains the right version and leaves the other unexplained (description length counts it
+    as such; it costs nothing).  Returns the primitives with the table rows each explains
+    (a row explained in both versions takes the one with the smaller residual) and, per
+    table row, whether it is now used as the other class.
+    """
+    from wholearm_tools.fit import FitData, segment
+    from wholearm_tools.fit.core import residuals
+    from wholearm_tools.fit.data import MIN_WEIGHT
+    from wholearm_tools.fit.models import MODELS
+
+    swap = np.zeros(len(table), dtype=bool)
+    left = reps[seg_rows[reps] < 0]
+    p = table.p_tip[left]
+    unsure = left[(p > UNCERTAIN_P_TIP[0]) & (p < UNCERTAIN_P_TIP[1])]
+    least = min(MODELS[k].dof for k in kinds) + 2
+    if len(left) < least or unsure.size == 0:
+        return [], swap
+    rows = np.concatenate([left, unsure])
+    as_tip = np.concatenate([table.used_as_tip[left], ~table.used_as_tip[unsure]])
+    weight = 1.0 / table.variance
+    weight = np.maximum(weight / weight.max(), MIN_WEIGHT)
+    tr, lr = rows[as_tip], rows[~as_tip]
+    data = FitData.create(
+        tip_points=table.tip_center[tr], tip_radius=table.tip_radius[tr],
+        tip_weight=weight[tr], link_a=table.seg_a[lr], link_b=table.seg_b[lr],
+        link_radius=table.link_radius[lr], link_weight=weight[lr], free_points=free_points,
+        dim=table.dim)
+    fit_rows = np.concatenate([tr, lr])
+    fit_tip = np.concatenate([np.ones(len(tr), bool), np.zeros(len(lr), bool)])
+    seg = segment(data, kinds=kinds, noise=max(sigma, noise_floor, 1e-12),
+                  noise_floor=noise_floor, min_radius=0.5 * float(B))
+    out: list[tuple[Any, NDArray]] = []
+    taken = np.zeros(len(table), dtype=bool)
+    for k, fit in enumerate(seg.primitives):
+        mem = seg.members(k)
+        r = np.abs(residuals(fit.kind, fit.params, data, fit.free_side))
+        chosen: dict[int, int] = {}
+        for i in mem[np.argsort(r[mem], kind="stable")]:
+            chosen.setdefault(int(fit_rows[i]), int(i))
+        keep = {row: i for row, i in chosen.items() if not taken[row]}
+        if len(keep) < MODELS[fit.kind].dof + 2:
+            continue
+        idx = np.array(sorted(keep), dtype=np.int64)
+        taken[idx] = True
+        versions = np.array([keep[row] for row in idx.tolist()])
+        swap[idx] = fit_tip[versions] != table.used_as_tip[idx]
+        out.append((fit, idx))
+    return out, swap
 
 
 def _with_contact_hints(table: ContactTable, free_points: NDArray | None) -> NDArray | None:
