@@ -199,3 +199,17 @@ def test_cli_reconstruct_without_contacts_exits_nonzero(tmp_path):
     assert out.exit_code != 0
     assert "nothing could be fitted" in out.output
     assert "Traceback" not in out.output
+
+
+def test_same_input_gives_the_same_map():
+    rng = np.random.default_rng(7)
+    tips = _circle_tips(14) + 2e-4 * rng.normal(size=(14, 2))
+    table = _table(tips)
+    first, _, out1, _ = fit_table(table, planar=True, B=0.02, noise_floor=1e-4)
+    again, _, out2, _ = fit_table(table, planar=True, B=0.02, noise_floor=1e-4)
+    assert [p.kind for p in first.primitives] == ["circle"]
+    assert [p.kind for p in again.primitives] == ["circle"]
+    for a, b in zip(first.primitives, again.primitives, strict=True):
+        for key, value in a.params.items():
+            np.testing.assert_array_equal(value, b.params[key])
+    np.testing.assert_array_equal(out1.primitive, out2.primitive)

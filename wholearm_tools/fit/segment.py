@@ -29,8 +29,11 @@
    ``max_rel_std`` (at noise ``max(sigma, 1e-4 x scene size)``).  Link contacts that all touch
    at one point (every contact of the first link starts at the base), or tangent lines from one
    point to a circle, leave a direction free and are rejected here.
-6. **Assignment**: sigma is re-estimated (raised only) from the residuals the selected
-   primitives explain (1.4826 x MAD); every contact goes to the selected primitive with the
+6. **Assignment**: sigma is re-estimated from every contact's smallest residual under the
+   selected primitives, as the fixed point of the RMS of the residuals within ``k_sigma x
+   sigma`` corrected for that truncation (a MAD of the gated residuals is biased low); while
+   the best seeds fit at the encoder floor, sigma never exceeds ``FLOOR_CAP x noise_floor``
+   (in the seed estimate too); every contact goes to the selected primitive with the
    smallest residual within ``k_sigma * sigma``; each primitive is refitted on its contacts;
    contacts explained by none are unexplained (``-1``).
 """
