@@ -529,36 +529,86 @@ def _cone_params(th: FloatArray) -> dict[str, Any]:
             "half_angle": float(th[6])}
 
 
-def _cone_from_axis(ctx: InitContext, axis: FloatArray) -> list[FloatArray]:
-    """Meridian line fit: in (h, rho) coordinates about a trial axis through the circle centre
-    of the points' projection, the surface is a straight line rho = k (h - h0)."""
-    surf = ctx.surface_points
-    out = []
-    for ax in (axis, -axis):
-        u, v = _perp_basis(ax)
-        c2, _ = kasa(np.stack([surf @ u, surf @ v], axis=1))
-        base = c2[0] * u + c2[1] * v
-        h = (surf - base) @ ax
-        q = surf - base - h[:, None] * ax
-        rho = np.linalg.norm(q, axis=1)
-        A = np.stack([h, np.ones_like(h)], axis=1)
-        (k, k0), *_ = np.linalg.lstsq(A, rho, rcond=None)
-        if k <= 1e-3:
-            continue
-        alpha = float(np.clip(np.arctan(k), 2 * _A_MIN, np.pi / 2 - 2 * _A_MIN))
-        h0 = -k0 / k  # rho = 0 at the apex
-        apex = base + h0 * ax
-        # shift the apex along the axis to account for the contact radius
-        w = float(np.mean(ctx.offsets))
-        apex = apex + ctx.side * w / np.sin(alpha) * ax
-        out.append(np.concatenate([apex, ax, [alpha]]))
-    return out
+def _cone_fits(X: FloatArray, A: FloatArray) -> tuple[FloatArray, ...]:
+    """Algebraic cone fit of points ``X (N, 3)`` about each trial axis direction ``A (K, 3)``.
+
+    About an axis of direction ``a`` through ``(cx, cy)`` in the perpendicular plane, a cone is
+    ``rho = k h + m`` (``rho`` distance to the axis, ``h`` axial coordinate), i.e.
+    ``x^2 + y^2 = 2 cx x + 2 cy y + k^2 h^2 + 2 k m h + (m^2 - cx^2 - cy^2)``: linear in five
+    unknowns for a fixed ``a`` (a cylinder is ``k = 0``).  Returns ``(cx, cy, k, m, score)``
+    per direction with ``score`` the sum of squared geometric (meridian) residuals, ``inf``
+    where the fit is not a cone opening along ``+a`` (``k <= 0``).
+    """
+    E = np.eye(3)[np.argmin(np.abs(A), axis=1)]
+    U = np.cross(A, E)
+    U /= np.linalg.norm(U, axis=1, keepdims=True)
+    V = np.cross(A, U)
+    x, y, h = X @ U.T, X @ V.T, X @ A.T  # (N, K)
+    M = np.stack([2 * x, 2 * y, h * h, h, np.ones_like(x)], axis=2)  # (N, K, 5)
+    MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(5)
+    Mty = np.einsum("nki,nk->ki", M, x * x + y * y)
+    sol = np.linalg.solve(MtM, Mty[..., None])[..., 0]  # (K, 5)
+    cx, cy = sol[:, 0], sol[:, 1]
+    k = np.sqrt(np.maximum(sol[:, 2], 0.0))
+    m = sol[:, 3] / np.maximum(2 * k, 1e-12)
+    rho = np.sqrt((x - cx) ** 2 + (y - cy) ** 2)
+    res = (rho - k * h - m) / np.sqrt(1 + k * k)
+    score = np.sum(res * res, axis=0)
+    score[~np.isfinite(score) | (sol[:, 2] <= 1e-6)] = np.inf
+    return cx, cy, k, m, score
 
 
-def _cone_init(ctx: InitContext) -> list[FloatArray]:
+def _cone_raw(ctx: InitContext, axis: FloatArray, cx: float, cy: float, k: float, m: float
+              ) -> FloatArray | None:
+    """Raw cone vector from one algebraic fit (apex shifted for the contact radii)."""
+    if not (k > 1e-3 and np.isfinite(k) and np.isfinite(m)):
+        return None
+    u, v = _perp_basis(axis)
+    alpha = float(np.clip(np.arctan(k), 2 * _A_MIN, np.pi / 2 - 2 * _A_MIN))
+    apex = cx * u + cy * v - (m / k) * axis  # rho = 0 at h = -m / k
+    # the contact centres lie on the cone offset by w: same axis and angle, apex moved
+    w = float(np.mean(ctx.offsets))
+    apex = apex + ctx.side * w / np.sin(alpha) * axis
+    return np.concatenate([apex, axis, [alpha]])
+
+
+def _cone_init(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
+               ) -> list[FloatArray]:
+    """Cone guesses by direction sampling: the algebraic fit of :func:`_cone_fits` about each of
+    800 directions (both senses of the 400-direction hemisphere: a cone opens one way), the best
+    ``keep`` mutually distinct axes refined by shrinking perturbations; then the local-normal /
+    principal axes as a fallback."""
+    X = ctx.surface_points
     out: list[FloatArray] = []
+    if len(X) >= 6:
+        dirs = np.vstack([_DIRECTIONS, -_DIRECTIONS])
+        *_, score = _cone_fits(X, dirs)
+        cos_min = np.cos(np.radians(min_angle_deg))
+        chosen: list[FloatArray] = []
+        for j in np.argsort(score):
+            if not np.isfinite(score[j]) or len(chosen) >= keep:
+                break
+            if all(float(dirs[j] @ a) < cos_min for a in chosen):
+                chosen.append(dirs[j])
+        for axis in chosen:
+            best_s = float(_cone_fits(X, axis[None])[4][0])
+            for step in (0.06, 0.02, 0.007, 0.0025, 0.0008):
+                C = axis[None] + step * _LOCAL
+                C /= np.linalg.norm(C, axis=1, keepdims=True)
+                sc = _cone_fits(X, C)[4]
+                j = int(np.argmin(sc))
+                if sc[j] < best_s:
+                    axis, best_s = C[j], float(sc[j])
+            cx, cy, k, m, _ = _cone_fits(X, axis[None])
+            raw = _cone_raw(ctx, axis, float(cx[0]), float(cy[0]), float(k[0]), float(m[0]))
+            if raw is not None:
+                out.append(raw)
     for ax in _axis_candidates(ctx):
-        out.extend(_cone_from_axis(ctx, ax))
+        for sense in (ax, -ax):
+            cx, cy, k, m, _ = _cone_fits(X, sense[None])
+            raw = _cone_raw(ctx, sense, float(cx[0]), float(cy[0]), float(k[0]), float(m[0]))
+            if raw is not None:
+                out.append(raw)
     return out
 
 
