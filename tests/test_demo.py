@@ -22,6 +22,7 @@ def test_demo_writes_every_deliverable(tmp_path) -> None:
     assert surface_map.planar
     assert surface_map.primitives, "the demo map has no primitive"
     run = read_run(out / "run.mcap")
-    assert run.truth is not None and run.truth.n_contacts > 0
+    assert run.truth is not None
+    assert run.truth.n_contacts > 0
     assert "outputs in" in result.output
     assert not list(out.glob(".*.tmp")), "temporary files left behind"

@@ -190,3 +190,39 @@ def test_radii_must_decrease_outward() -> None:
         "tip": {"offset": [0.2, 0, 0], "radius": 0.0}})
     with pytest.raises(InputError, match="decrease outward"):
         simulate(robot, pocket(), duration=1.0)
+
+
+def _single_joint_move(home, target):
+    robot, env = two_link(), pocket()
+    strat = FixedTargets(robot, env, [target])
+    return simulate(robot, env, strategy=strat, duration=3.0, seed=0, home=home)
+
+
+def test_held_joint_resists_the_contact_force_of_its_own_link() -> None:
+    """Only joint 0 moves; the tip (link 1) hits the wall.  Joint 1, held in place, carries the
+    contact force's moment: tau_1 / tau_0 = g_1 / g_0 with g_i = (z x (p - o_i)) . n."""
+    res = _single_joint_move([1.0, -0.9], [1.8, -0.9])
+    truth = res.truth
+    assert truth.n_contacts >= 1
+    assert (truth.contact_link[0], truth.contact_kind[0], truth.contact_surface[0]) == (1, "tip", 1)
+    q = res.contact_q[0]
+    o = res.run.robot.joint_positions(q)[:2]
+    p = truth.contact_point[0]
+    n = np.array([0.0, -1.0, 0.0])  # the wall y = 0.52, free below: its normal towards the arm
+    g = np.cross([0.0, 0.0, 1.0], p - o) @ n
+    k0 = int(np.ceil(truth.contact_t[0] * 500))
+    tau = res.run.log.tau_cmd[k0 + 20:k0 + 45]
+    assert np.all(np.abs(tau[:, 1]) > 0.05)  # well above the noise (~1e-3 N m)
+    np.testing.assert_allclose(tau[:, 1] / tau[:, 0], g[1] / g[0], rtol=0.02)
+
+
+def test_contact_on_an_inner_link_leaves_outer_held_joints_unloaded() -> None:
+    """Only joint 0 moves; link 0 hits the post: joint 1 is held but carries no load."""
+    res = _single_joint_move([0.0, -0.9], [1.0, -0.9])
+    truth = res.truth
+    assert truth.contact_link[0] == 0
+    assert truth.contact_surface[0] == 0
+    k0 = int(np.ceil(truth.contact_t[0] * 500))
+    tau = res.run.log.tau_cmd[k0 + 20:k0 + 45]
+    assert np.all(np.abs(tau[:, 0]) > 0.5)
+    assert np.all(np.abs(tau[:, 1]) < 0.01)

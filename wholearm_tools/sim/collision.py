@@ -20,7 +20,7 @@ penetration.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -70,6 +70,8 @@ class ContactInfo:
     surface: int
     s: float
     clearance: float
+    #: unit surface normal at the contact, pointing from the surface to the robot (3,)
+    normal: FloatArray = field(default_factory=lambda: np.zeros(3))
 
 
 class Collider:
@@ -323,8 +325,16 @@ class Collider:
         sid, surf_point = self._surface_of(k, centre[: self.dim], surf_point)
         point = np.zeros(3)
         point[: self.dim] = surf_point
+        away = centre[: self.dim] - surf_point
+        if np.linalg.norm(away) < 1e-6:
+            # sharp tip on the surface: the normal at a point just behind it, inside the link
+            back = pts[link] - centre
+            x0 = centre + 1e-4 * back / max(float(np.linalg.norm(back)), 1e-12)
+            away = x0[: self.dim] - _closest_surface_point(obs, x0[: self.dim])
+        normal = np.zeros(3)
+        normal[: self.dim] = away / max(float(np.linalg.norm(away)), 1e-15)
         return ContactInfo(link=link, kind=kind, point=point, surface=sid, s=float(s),
-                           clearance=float(cl.value[0, 0]))
+                           clearance=float(cl.value[0, 0]), normal=normal)
 
     def _surface_of(self, k: int, centre: FloatArray, approx: FloatArray,
                     ) -> tuple[int, FloatArray]:

@@ -17,6 +17,13 @@ torques persisting), then retreats back along the path it swept (known free) unt
 clears the environment by ``retreat_clearance`` (or to the move's start), and the strategy picks
 the next target.
 
+Contact loads: the joints a move does not command (held in place) are loaded by the contact
+force too.  A frictionless contact on link ``k`` pushes along the surface normal with the force
+that balances the blocked joints' impedance torques (least squares); each held joint ``i <= k``
+resists with minus its moment, and joints beyond ``k`` carry nothing (:func:`_contact_loads`).
+Positions stay frozen (a rigid stop), so this adds torque only — what lets the log tell, for a
+single-joint move, which of the links moving as one rigid body touched.
+
 Contacts are found exactly (see :mod:`wholearm_tools.sim.collision`): first-contact times, at most
 ``tolerance`` of penetration, at any speed.
 
@@ -178,6 +185,8 @@ class _Recorder:
         self.q = np.zeros((n_samples, dof))
         self.qd = np.zeros((n_samples, dof))
         self.q_cmd = np.zeros((n_samples, dof))
+        #: torque held joints exert against contact forces (see :func:`_contact_loads`)
+        self.load = np.zeros((n_samples, dof))
         self.k = 0  # last filled index
 
     def time(self, k: int) -> float:
@@ -314,6 +323,8 @@ def simulate(
         hold = controller.dwell if has_contact else 0.0
         k_hold = int(np.ceil((t_stop + hold) / dt - 1e-9))
         rec.fill(k_hold, move_samples)
+        if has_contact:
+            _contact_loads(rec, robot, K, result, delta, t0, k_hold)
         if not has_contact:
             q_end = result.vertices[-1]
             swept = densify(result.vertices, sweep_step, max_lever)
@@ -433,6 +444,43 @@ def _guarded_move(collider: Collider, q0: FloatArray, q1: FloatArray, law: Trape
                        contacts=contacts)
 
 
+def _contact_loads(rec: _Recorder, robot: RobotModel, K: FloatArray, result: _MoveResult,
+                   delta: FloatArray, t0: float, k_last: int) -> None:
+    """Torques of the *held* joints (not commanded to move) against each contact's force.
+
+    A frictionless contact on link ``k`` at surface point ``p`` with unit normal ``nu``
+    (surface → robot) pushes with ``F = f nu``; its moment about joint ``i <= k`` is
+    ``f g_i`` with ``g_i = (a_i x (p - o_i)) . nu`` (joints beyond ``k`` carry none).  The
+    joints the contact blocked while they moved press with their impedance torque
+    ``K (q_cmd - q)``; quasi-static balance gives ``f = max(0, -sum_b tau_b g_b / sum_b g_b^2)``
+    (least squares over the blocked joints), and every held joint ``i <= k`` resists with
+    ``-f g_i`` — the torque a real controller shows when a joint it holds in place is loaded.
+    Positions stay frozen (the kinematic model's rigid stop), so this adds torque only.
+    Written into ``rec.load`` from the contact sample to ``k_last`` (the end of the dwell).
+    """
+    n = robot.dof
+    moving = np.abs(delta) > 1e-12
+    joints = np.arange(n)
+    for tc, link, info, qc in result.contacts:
+        k0 = int(np.ceil((t0 + tc) / rec.dt - 1e-9))
+        k1 = min(k_last, rec.k)
+        held = ~moving & (joints <= link)
+        blocked = moving & (joints <= link) & (np.abs(result.freeze - tc) <= 1e-12)
+        if k0 > k1 or not held.any() or not blocked.any():
+            continue
+        pts = robot.joint_positions(qc)
+        axes = robot.joint_axes(qc)
+        g = np.cross(axes, info.point - pts[:n]) @ info.normal
+        g[joints > link] = 0.0
+        gb = g[blocked]
+        if float(gb @ gb) <= 1e-18:
+            continue
+        ks = np.arange(k0, k1 + 1)
+        tau_b = K[blocked] * (rec.q_cmd[ks][:, blocked] - rec.q[ks][:, blocked])
+        f = np.maximum(-(tau_b @ gb) / float(gb @ gb), 0.0)
+        rec.load[np.ix_(ks, np.flatnonzero(held))] -= f[:, None] * g[held][None, :]
+
+
 def _retreat_vertices(collider: Collider, vertices: FloatArray, ctrl: Controller) -> FloatArray:
     """Reversed executed polyline from its end back to the retreat point."""
     rev = vertices[::-1]
@@ -471,7 +519,7 @@ def _sense(robot: RobotModel, rec: _Recorder, sensors: Sensors, K: FloatArray, D
         back = np.maximum(ks - w, 0)
         qd_meas[1:] = (q_meas[ks] - q_meas[back]) / ((ks - back) * rec.dt)[:, None]
     eff = np.asarray(robot.effort_limits)
-    tau = np.clip(K * (rec.q_cmd - q_meas) - D * qd_meas, -eff, eff)
+    tau = np.clip(K * (rec.q_cmd - q_meas) - D * qd_meas + rec.load, -eff, eff)
     t = np.arange(N) * rec.dt
     return JointLog(joint_names=robot.joint_names, t=t, q=q_meas, qd=qd_meas, tau_cmd=tau,
                     q_cmd=rec.q_cmd.copy(), t0_ns=SIM_T0_NS)
