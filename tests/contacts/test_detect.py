@@ -137,3 +137,21 @@ def test_missing_torques_and_nans_are_clear_errors():
         detect_contacts(bad)
     with pytest.raises(InputError, match="min_stop_samples"):
         DetectionParams(min_stop_samples=0)
+
+
+def test_single_joint_move_link_from_the_held_joints_load():
+    """Only joint 0 moves and link 1's tip hits the wall (simulated).  Joint 1 is held, so
+    velocities alone cannot tell link 0 from link 1; the load it carries does — with no robot
+    model and no swept map (rigid_choice="outer" would say 1 for any rigid move, "map" needs a
+    robot, so use the innermost link of the group to show the torque alone decides)."""
+    from tests.sim.conftest import pocket, two_link
+    from tests.sim.test_simulator import FixedTargets
+    from wholearm_tools.sim import simulate
+
+    robot, env = two_link(), pocket()
+    for home, target, link in (([1.0, -0.9], [1.8, -0.9], 1), ([0.0, -0.9], [1.0, -0.9], 0)):
+        res = simulate(robot, env, strategy=FixedTargets(robot, env, [target]), duration=3.0,
+                       seed=0, home=home)
+        c = detect_contacts(res.run.log, params=DetectionParams(rigid_outer=False))
+        assert len(c) == res.truth.n_contacts >= 1
+        assert c.link[0] == res.truth.contact_link[0] == link

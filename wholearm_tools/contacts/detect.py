@@ -355,15 +355,27 @@ def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
 
 
 def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
-                  groups: list[tuple[int, int]], B: float) -> list[int]:
-    """Link of each rigid group ``lo..hi`` that most likely touched, from geometry and the map.
+                  tau: FloatArray, tau_tol: FloatArray, groups: list[tuple[int, int]],
+                  B: float, force_angle: float = 20.0) -> list[int]:
+    """Link of each rigid group ``lo..hi`` that most likely touched, from geometry, the map and
+    the loads on the held joints.
 
     Eq. (2)'s reasoning applied across links: the chance that link ``k`` made the contact is
     proportional to ``∫ (n·v)+ P_C`` over its dilated boundary (side and outer sphere, exposed
     part only) at the contact pose, with ``P_C`` from the whole run's swept map — space the arm
-    swept at any time (before or after) cannot hold the surface that stopped it.  ``q, qd`` are
-    ``(G, n)`` (one row per group).  Returns the argmax of each group; its outermost link when
-    the map rules everything out (an assumption violated).
+    swept at any time (before or after) cannot hold the surface that stopped it.
+
+    Only boundary points consistent with the joint torques count.  A frictionless contact at
+    robot point ``r`` pushes along the boundary normal ``-nu``; its moment about joint ``i`` is
+    ``f g_i``, ``g_i = (a_i x (r - o_i)) . (-nu)``, with ``f`` balancing the torques ``tau`` of
+    the joints that were moving (least squares).  Joints ``lo+1..hi`` were held and carry no
+    load, so a point of link ``k > lo`` counts only where the predicted held torques
+    ``|f g_i|``, ``lo < i <= k``, stay below the load thresholds ``tau_th`` (the force passes
+    (nearly) through those axes — a roll joint along its link, a push along the link).
+
+    ``q, qd, tau`` are ``(G, n)`` (one row per group: configuration, joint velocity before the
+    stop, commanded torque at the height of the stop).  Returns the argmax of each group; the
+    torque-identified link ``lo`` when no candidate keeps any admissible boundary.
     """
     from wholearm_tools.classify.swept import swept_map
     from wholearm_tools.classify.tip import ClassifyParams, _boundary
@@ -373,17 +385,64 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
     bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
     tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
-    mass = (bd.flux * (tmin >= grid.n_samples)).sum(1)
+    consistent = _torque_consistent(robot, q[rows], bd, qd[rows] != 0, tau[rows], tau_tol,
+                                    cand, B, np.radians(force_angle))
+    mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
     out = []
-    for g, (_lo, hi) in enumerate(groups):
+    for g, (lo, _hi) in enumerate(groups):
         sel = rows == g
-        out.append(int(cand[sel][np.argmax(mass[sel])]) if np.any(mass[sel] > 0) else hi)
+        out.append(int(cand[sel][np.argmax(mass[sel])]) if np.any(mass[sel] > 0) else lo)
     return out
+
+
+def _torque_consistent(robot: RobotModel, q: FloatArray, bd: Any, moving: NDArray[np.bool_],
+                       tau: FloatArray, tau_tol: FloatArray, cand: IntArray, B: float,
+                       angle: float) -> NDArray[np.bool_]:
+    """``(R, Q)`` bool: boundary points of candidate link ``cand[r]`` whose contact force
+    explains the torques of the held joints (see :func:`_choose_rigid`).
+
+    The predicted torque of a held joint ``i`` is ``-f g_i`` for ``i <= cand`` and 0 beyond;
+    a point is consistent when every held joint's observed torque lies within ``tau_tol`` plus
+    the change of ``f g_i`` when the force leans from the quadrature normal by up to
+    ``angle`` (friction, quadrature spacing).
+    """
+    R, Qn = bd.flux.shape
+    n = robot.dof
+    pts = robot.joint_positions(q)                    # (R, n+1, 3)
+    axes = robot.joint_axes(q)                        # (R, n, 3)
+    x = np.zeros((R, Qn, 3))
+    x[..., : robot.dim] = bd.x
+    # boundary normal: from the nearest point of the candidate's capsule out to x
+    ar = np.arange(R)
+    a, b = pts[ar, cand], pts[ar, cand + 1]
+    ab = b - a
+    u = np.clip(np.einsum("rqk,rk->rq", x - a[:, None], ab)
+                / np.maximum(np.einsum("rk,rk->r", ab, ab), 1e-300)[:, None], 0, 1)
+    on_axis = a[:, None] + u[..., None] * ab[:, None]
+    tip = np.asarray(bd.tip)[None, :, None]
+    centre = np.where(tip, b[:, None], on_axis)
+    nu = x - centre
+    nu /= np.maximum(np.linalg.norm(nu, axis=-1, keepdims=True), 1e-12)
+    r_pt = x - B * nu                                 # the robot's own surface point
+    lever = np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :n, :])  # (R, Q, n, 3)
+    g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
+    joints = np.arange(n)[None, None, :]
+    g = np.where(joints <= cand[:, None, None], g, 0.0)
+    mv = moving[:, None, :]
+    gb = np.where(mv, g, 0.0)
+    f = np.maximum(-np.einsum("rqj,rj->rq", gb, np.where(moving, tau, 0.0))
+                   / np.maximum(np.einsum("rqj,rqj->rq", gb, gb), 1e-300), 0.0)
+    pred = -f[..., None] * g                          # (R, Q, n)
+    slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
+    slack = np.where(joints <= cand[:, None, None], slack, 0.0)
+    ok = np.abs(pred - tau[:, None, :]) <= tau_tol[None, None, :] + slack
+    return np.all(mv | ok, axis=-1)
 
 
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
                      blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
-                     qd_s: FloatArray, v_th: FloatArray) -> list[tuple[int, int, int]]:
+                     qd_s: FloatArray, v_th: FloatArray, window: int,
+                     ) -> list[tuple[int, int, int]]:
     """Recover the inner contact of a quick two-stage event.
 
     When link ``j`` touches and an outer link ``n`` stops on its own obstacle less than the
@@ -391,10 +450,17 @@ def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
     shows a stop that began distinctly earlier (``gap`` samples, more than the smoothing can
     shift a stop) than joint ``n``'s, after clear motion (3 velocity thresholds), and lasted up
     to the rise, where it is blocked (loaded):
-    that earlier stop is a contact on link ``j`` (the outermost such joint).
+    that earlier stop is a contact on link ``j`` (the outermost such joint).  The earlier stop
+    must lie within ``window`` samples (the minimum duration plus the gap) of joint ``n``'s:
+    a joint that stopped long before — it reached its target and was then held, loaded by the
+    outer contact's force — was not blocked by a contact of its own (the debounced label would
+    have risen to it).
     """
     out: list[tuple[int, int, int]] = []
     prev_label = -1
+    # joints 0..j all stopped: the prefix stop starts when the last of them stopped (their
+    # smoothed velocities cross the threshold a sample or two apart)
+    prefix = np.cumprod(stopped, axis=1).astype(bool)
     for s, e, link in rows:
         prev_label = int(labels[s - 1]) if s > 0 else -1
 
@@ -409,14 +475,15 @@ def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
         for j in range(link - 1, prev_label, -1):
             if not blocked[s, j]:
                 continue
-            on_j = onset(j, stopped)
+            on_j = onset(j, prefix)
             # ... and it was a real stop: the joint was moving clearly (not creeping) before it
-            approach = np.abs(qd_s[max(0, on_j - 2 * gap):on_j + 1, j])
-            if (on_j <= on_n - gap and np.all(stopped[on_j:s + 1, : j + 1])
+            own = onset(j, stopped)
+            approach = np.abs(qd_s[max(0, own - 2 * gap):own + 1, j])
+            if (on_n - window <= on_j <= on_n - gap
                     and approach.size and approach.max() > 3 * v_th[j]):
                 extra = (on_j, s, j)
                 break
-        if extra is not None:
+        if extra is not None and (not out or extra[0] > out[-1][0]):
             out.append(extra)
         out.append((s, e, link))
     return out
@@ -473,18 +540,27 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     ends = np.concatenate([change, [labels.shape[0]]])
     prev = -1
     rows: list[tuple[int, int, int]] = []
+    nb = max(2, round(params.before_time / dt))
     for s, e in zip(starts, ends, strict=True):
         cur = int(labels[s])
         if cur > prev and cur >= 0 and s > 0:
-            rows.append((int(s), int(e), cur))
+            s0 = rows[-1][0] if rows else 0
+            if (prev >= 0 and rows and rows[-1][2] == prev
+                    and np.all(stopped[max(0, s0 - nb):s + 1, prev + 1:cur + 1])):
+                # joints prev+1..cur were held still all along: no new stop, the same
+                # contact's force building up until their load crossed the threshold
+                rows[-1] = (s0, int(e), cur)
+            else:
+                rows.append((int(s), int(e), cur))
         prev = cur
     inner: dict[int, int] = {}  # start sample -> innermost link of its rigid group
     if params.rigid_outer:
         ext = _extend_rigid(rows, stopped, loaded, max(2, round(params.before_time / dt)))
         inner = {r[0]: r[2] for r in rows}
         rows = ext
-    rows = _split_two_stage(rows, labels, stopped & loaded, stopped,
-                            max(2, round(params.smooth_time / dt)) + 1, qd_s, v_th)
+    gap = max(2, round(params.smooth_time / dt)) + 1
+    rows = _split_two_stage(rows, labels, stopped & loaded, stopped, gap, qd_s, v_th,
+                            min_len + gap)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": sigma_tau.tolist(),
             "min_stop_samples": min_len, "rate": log.rate}
     if not rows:
@@ -493,7 +569,6 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
 
     q = np.asarray(log.q)
     qd = np.asarray(log.qd)
-    nb = max(2, round(params.before_time / dt))
     lag = max(1, round(params.smooth_time / dt) // 2)
     M = len(rows)
     idx = np.array([r[0] for r in rows])
@@ -518,6 +593,13 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
         if which:
             groups = [(inner[rows[i][0]], rows[i][2]) for i in which]
-            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which], groups,
-                                         params.rigid_dilation)
+            # torques at the height of each stop (the held joints' loads grow with it)
+            peak = []
+            for i in which:
+                s0, e0, _ = rows[i]
+                seg = tau[s0:max(e0, s0 + 1)]
+                peak.append(seg[int(np.argmax(np.abs(seg).sum(axis=1)))])
+            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which],
+                                         np.array(peak), tau_th,
+                                         groups, params.rigid_dilation)
     return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta)
