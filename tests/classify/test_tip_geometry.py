@@ -145,3 +145,25 @@ def test_no_contacts_classify_to_empty_records():
     cl = tip_probability(Run(robot, log), empty, 0.02)
     assert len(cl) == 0
     assert cl.label.shape == (0,)
+
+
+def test_held_joint_torque_narrows_where_the_contact_can_be():
+    """Only joint 0 moves and link 1's tip hits the wall (simulated).  With the map alone the
+    tip and the leading side of link 1 are both open (low P_T); the load on held joint 1 fixes
+    the moment-arm ratio, which only the tip explains."""
+    from tests.sim.conftest import pocket, two_link
+    from tests.sim.test_simulator import FixedTargets
+    from wholearm_tools.contacts import detect_contacts
+    from wholearm_tools.sim import simulate
+
+    robot, env = two_link(), pocket()
+    res = simulate(robot, env, strategy=FixedTargets(robot, env, [[1.8, -0.9]]), duration=3.0,
+                   seed=0, home=[1.0, -0.9])
+    assert res.truth.contact_kind.tolist() == ["tip"]
+    c = detect_contacts(res.run.log, robot)
+    assert c.held.tolist() == [[False, True]]
+    plain = tip_probability(res.run, c, 0.02, params=ClassifyParams(use_torques=False))
+    informed = tip_probability(res.run, c, 0.02)
+    assert plain.p_tip[0] < 0.3
+    assert informed.p_tip[0] > 0.9
+    assert informed.meta["torque_informed"] == 1

@@ -78,6 +78,8 @@ class ClassifyParams:
     n_axial: int = 0
     n_around: int = 0
     n_sphere: int = 0
+    use_torques: bool = True
+    torque_angle: float = 20.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.link_threshold <= self.tip_threshold <= 1.0:
@@ -379,12 +381,15 @@ class TipEvaluator:
         self.tol = (self.params.tol if self.params.tol is not None
                     else 0.25 * self.grid.resolution)
         M = len(contacts)
+        self.torque_informed = np.zeros(M, dtype=bool)
         if M:
             bd = _boundary(robot, np.asarray(contacts.q), np.asarray(contacts.qd_before),
                            np.asarray(contacts.link), self.B, self.params)
             self.flux = bd.flux
             self.tip = bd.tip
             self.tmin = self.grid.first_within(bd.x, self.B - self.tol)
+            if self.params.use_torques:
+                self._condition_on_torques(contacts, bd)
         else:
             self.flux = np.zeros((0, 1))
             self.tip = np.zeros(1, bool)
@@ -393,6 +398,34 @@ class TipEvaluator:
         den0 = self.flux.sum(1)
         with np.errstate(invalid="ignore", divide="ignore"):
             self.p_nomap = np.where(den0 > 0, num0 / np.where(den0 > 0, den0, 1), 0.5)
+
+    def _condition_on_torques(self, contacts: Contacts, bd: _Boundary) -> None:
+        """Keep only the boundary that explains the held joints' torques.
+
+        A joint held still during the move carries the contact force's moment alone; where the
+        contact could lie is restricted to the dilated-boundary points whose force predicts
+        those torques (:func:`wholearm_tools.contacts.detect.torque_consistent`).  Eq. (2) is
+        then the same ratio over that part: the map decides within what the torques allow.
+        Contacts without held joints, or whose torques no admissible point explains (an
+        assumption violated), keep the whole boundary.
+        """
+        from wholearm_tools.contacts.detect import torque_consistent
+
+        held = np.asarray(contacts.held)
+        rows = np.flatnonzero(held.any(axis=1))
+        if rows.size == 0:
+            return
+        ok = torque_consistent(
+            self.robot, np.asarray(contacts.q)[rows], bd.x[rows], bd.tip,
+            np.asarray(contacts.qd_before)[rows] != 0, held[rows],
+            np.asarray(contacts.tau_peak)[rows], np.asarray(contacts.torque_threshold),
+            np.asarray(contacts.link)[rows], self.B, np.radians(self.params.torque_angle))
+        free = self.tmin[rows] >= NEVER  # admissible with the whole run's map
+        kept = (self.flux[rows] * ok * free).sum(1) > 0
+        flux = self.flux.copy()
+        flux[rows[kept]] *= ok[kept]
+        self.flux = flux
+        self.torque_informed[rows[kept]] = True
 
     def p_tip(self, until: Any = None) -> tuple[FloatArray, NDArray[np.bool_]]:
         """P_T with the map of samples ``<= until`` (scalar or (M,); None = whole run).
@@ -426,7 +459,8 @@ class TipEvaluator:
         swept = _eq1_all(self.robot, log, c, self.B)
         meta = {"resolution": self.grid.resolution, "tol": self.tol,
                 "tip_threshold": prm.tip_threshold, "link_threshold": prm.link_threshold,
-                "sigma0": prm.sigma0}
+                "sigma0": prm.sigma0,
+                "torque_informed": int(np.count_nonzero(self.torque_informed))}
         return Classification(p, label, variance, self.p_nomap, swept, ok, self.B, causal, meta)
 
 

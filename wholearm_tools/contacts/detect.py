@@ -137,6 +137,12 @@ class Contacts:
         End of the blocked state (the retreat), seconds.
     velocity_threshold, torque_threshold : (n,) float
         The thresholds that were used (noise-derived unless overridden).
+    tau_peak : (M, n) float
+        Commanded torques at the height of the stop (the sample of largest total |tau| while
+        this contact's state lasts): the contact force's signature.  Zeros when unknown.
+    held : (M, n) bool
+        Joints at rest and unloaded just before the stop (not driven by this move): their
+        torque at the stop is the contact force's moment alone.  All False when unknown.
     """
 
     t: FloatArray
@@ -148,15 +154,27 @@ class Contacts:
     velocity_threshold: FloatArray
     torque_threshold: FloatArray
     meta: dict[str, Any] = field(default_factory=dict)
+    tau_peak: FloatArray | None = None
+    held: NDArray[np.bool_] | None = None
 
     def __post_init__(self) -> None:
         n = np.asarray(self.velocity_threshold).shape[0]
         m = np.asarray(self.t).reshape(-1).shape[0]
+        if self.tau_peak is None:
+            object.__setattr__(self, "tau_peak", np.zeros((m, n)))
+        if self.held is None:
+            object.__setattr__(self, "held", np.zeros((m, n), dtype=bool))
+        held = _frozen(self.held, bool)
+        if held.size == 0:
+            held = _frozen(np.zeros((m, n), dtype=bool))
+        if held.shape != (m, n):
+            raise InputError(f"expected held of shape ({m}, {n}), got {held.shape}")
+        object.__setattr__(self, "held", held)
         object.__setattr__(self, "t", _frozen(self.t).reshape(m))
         object.__setattr__(self, "link", _frozen(self.link, np.int64).reshape(m))
         object.__setattr__(self, "index", _frozen(self.index, np.int64).reshape(m))
         object.__setattr__(self, "t_end", _frozen(self.t_end).reshape(m))
-        for name in ("q", "qd_before"):
+        for name in ("q", "qd_before", "tau_peak"):
             arr = _frozen(getattr(self, name))
             if arr.size == 0:
                 arr = _frozen(np.zeros((m, n)))
@@ -183,7 +201,8 @@ class Contacts:
         sel = np.arange(len(self))[mask]
         return Contacts(self.t[sel], self.link[sel], self.index[sel], self.q[sel],
                         self.qd_before[sel], self.t_end[sel], self.velocity_threshold,
-                        self.torque_threshold, dict(self.meta))
+                        self.torque_threshold, dict(self.meta),
+                        tau_peak=self.tau_peak[sel], held=self.held[sel])
 
 
 # --------------------------------------------------------------------------- noise estimation
@@ -355,8 +374,9 @@ def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
 
 
 def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
-                  tau: FloatArray, tau_tol: FloatArray, groups: list[tuple[int, int]],
-                  B: float, force_angle: float = 20.0) -> list[int]:
+                  tau: FloatArray, held: NDArray[np.bool_], tau_tol: FloatArray,
+                  groups: list[tuple[int, int]], B: float, force_angle: float = 20.0,
+                  ) -> list[int]:
     """Link of each rigid group ``lo..hi`` that most likely touched, from geometry, the map and
     the loads on the held joints.
 
@@ -373,8 +393,8 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     ``|f g_i|``, ``lo < i <= k``, stay below the load thresholds ``tau_th`` (the force passes
     (nearly) through those axes — a roll joint along its link, a push along the link).
 
-    ``q, qd, tau`` are ``(G, n)`` (one row per group: configuration, joint velocity before the
-    stop, commanded torque at the height of the stop).  Returns the argmax of each group; the
+    ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
+    the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of each group; the
     torque-identified link ``lo`` when no candidate keeps any admissible boundary.
     """
     from wholearm_tools.classify.swept import swept_map
@@ -385,8 +405,8 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
     bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
     tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
-    consistent = _torque_consistent(robot, q[rows], bd, qd[rows] != 0, tau[rows], tau_tol,
-                                    cand, B, np.radians(force_angle))
+    consistent = torque_consistent(robot, q[rows], bd.x, bd.tip, qd[rows] != 0, held[rows],
+                                   tau[rows], tau_tol, cand, B, np.radians(force_angle))
     mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
     out = []
     for g, (lo, _hi) in enumerate(groups):
@@ -395,23 +415,39 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     return out
 
 
-def _torque_consistent(robot: RobotModel, q: FloatArray, bd: Any, moving: NDArray[np.bool_],
-                       tau: FloatArray, tau_tol: FloatArray, cand: IntArray, B: float,
-                       angle: float) -> NDArray[np.bool_]:
-    """``(R, Q)`` bool: boundary points of candidate link ``cand[r]`` whose contact force
-    explains the torques of the held joints (see :func:`_choose_rigid`).
+def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, on_end: Any,
+                      moving: NDArray[np.bool_], held: NDArray[np.bool_], tau: FloatArray,
+                      tau_tol: FloatArray, cand: IntArray, B: float, angle: float,
+                      ) -> NDArray[np.bool_]:
+    """Which dilated-boundary points of link ``cand[r]`` could have made the contact, judged by
+    the torques of the held joints.
 
-    The predicted torque of a held joint ``i`` is ``-f g_i`` for ``i <= cand`` and 0 beyond;
-    a point is consistent when every held joint's observed torque lies within ``tau_tol`` plus
-    the change of ``f g_i`` when the force leans from the quadrature normal by up to
-    ``angle`` (friction, quadrature spacing).
+    A frictionless contact at robot point ``r`` (boundary point ``x`` minus ``B`` along its
+    outward normal ``nu``) pushes along ``-nu``; its moment about joint ``i <= cand`` is
+    ``f g_i``, ``g_i = (a_i x (r - o_i)) . (-nu)``, zero beyond ``cand``.  ``f`` is fitted to the
+    torques of the ``moving`` joints (least squares, ``f >= 0``); a point is consistent when every
+    ``held`` joint's observed torque lies within ``tau_tol`` of its prediction ``-f g_i``,
+    widened by the change of the moment when the force leans up to ``angle`` from the normal
+    (friction, quadrature spacing).
+
+    Parameters
+    ----------
+    q, moving, held, tau : (R, n) configuration, joints driven into the stop, held joints,
+        torques at the height of the stop
+    x_bd : (R, Q, d) boundary points; on_end : (Q,) bool, point on the link's outer sphere
+    tau_tol : (n,) torque tolerance; cand : (R,) candidate link; B : dilation [m]
+    angle : float [rad]
+
+    Returns
+    -------
+    (R, Q) bool (all True for a row without held joints)
     """
-    R, Qn = bd.flux.shape
+    R, Qn = x_bd.shape[:2]
     n = robot.dof
     pts = robot.joint_positions(q)                    # (R, n+1, 3)
     axes = robot.joint_axes(q)                        # (R, n, 3)
     x = np.zeros((R, Qn, 3))
-    x[..., : robot.dim] = bd.x
+    x[..., : robot.dim] = x_bd
     # boundary normal: from the nearest point of the candidate's capsule out to x
     ar = np.arange(R)
     a, b = pts[ar, cand], pts[ar, cand + 1]
@@ -419,7 +455,7 @@ def _torque_consistent(robot: RobotModel, q: FloatArray, bd: Any, moving: NDArra
     u = np.clip(np.einsum("rqk,rk->rq", x - a[:, None], ab)
                 / np.maximum(np.einsum("rk,rk->r", ab, ab), 1e-300)[:, None], 0, 1)
     on_axis = a[:, None] + u[..., None] * ab[:, None]
-    tip = np.asarray(bd.tip)[None, :, None]
+    tip = np.asarray(on_end)[None, :, None]
     centre = np.where(tip, b[:, None], on_axis)
     nu = x - centre
     nu /= np.maximum(np.linalg.norm(nu, axis=-1, keepdims=True), 1e-12)
@@ -436,7 +472,7 @@ def _torque_consistent(robot: RobotModel, q: FloatArray, bd: Any, moving: NDArra
     slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
     slack = np.where(joints <= cand[:, None, None], slack, 0.0)
     ok = np.abs(pred - tau[:, None, :]) <= tau_tol[None, None, :] + slack
-    return np.all(mv | ok, axis=-1)
+    return np.all(~held[:, None, :] | ok, axis=-1)
 
 
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
@@ -575,6 +611,8 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     out_q = q[idx].copy()
     out_qd = np.zeros((M, n))
     t_end = np.empty(M)
+    peak = np.zeros((M, n))
+    held = np.zeros((M, n), dtype=bool)
     for i, (s, e, link) in enumerate(rows):
         # the segment may end when an outer link stops too; the blocked state lasts until the
         # label drops below this link
@@ -588,18 +626,20 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         out_qd[i] = qd[lo:hi].mean(axis=0)
         at_rest = np.all(stopped[lo:hi], axis=0)  # already stopped before this contact
         out_qd[i, at_rest] = 0.0
+        # held: at rest and unloaded over the window before that (the contact's own load can
+        # show on a held joint a few samples before the smoothed velocities call the stop)
+        h0, h1 = max(0, lo - nb), max(1, lo)
+        held[i] = (at_rest & np.all(stopped[h0:h1], axis=0)
+                   & ~np.any(loaded[h0:h1], axis=0))
+        # torques at the height of the stop (the held joints' loads grow with the force)
+        seg = tau[s:max(e, s + 1)]
+        peak[i] = seg[int(np.argmax(np.abs(seg).sum(axis=1)))]
     links = np.array([r[2] for r in rows])
     if params.rigid_outer and params.rigid_choice == "map" and robot is not None:
         which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
         if which:
             groups = [(inner[rows[i][0]], rows[i][2]) for i in which]
-            # torques at the height of each stop (the held joints' loads grow with it)
-            peak = []
-            for i in which:
-                s0, e0, _ = rows[i]
-                seg = tau[s0:max(e0, s0 + 1)]
-                peak.append(seg[int(np.argmax(np.abs(seg).sum(axis=1)))])
-            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which],
-                                         np.array(peak), tau_th,
-                                         groups, params.rigid_dilation)
-    return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta)
+            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which], peak[which],
+                                         held[which], tau_th, groups, params.rigid_dilation)
+    return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta,
+                    tau_peak=peak, held=held)
