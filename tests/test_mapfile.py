@@ -72,7 +72,9 @@ def sample_table(dim: int = 2) -> ContactTable:
         variance=np.full(m, 1e-6), used_as_tip=np.array([True, False, True, False, True]),
         tip_center=a + 1, tip_radius=np.full(m, 0.015), seg_a=a, seg_b=a + 1,
         link_radius=np.full(m, 0.01), primitive=np.array([0, 0, 1, -1, 1]),
-        residual=np.array([1e-4, -2e-4, 3e-5, np.nan, 0.0]))
+        residual=np.array([1e-4, -2e-4, 3e-5, np.nan, 0.0]),
+        p_tip_map=np.array([0.99, 0.01, np.nan, 0.0, 1.0]),
+        label_map=np.array(["tip", "link", "", "link", "tip"]))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -87,6 +89,8 @@ def test_contact_table_csv_round_trip(tmp_path, dim: int) -> None:
     np.testing.assert_array_equal(back.used_as_tip, table.used_as_tip)
     np.testing.assert_array_equal(back.primitive, table.primitive)
     np.testing.assert_allclose(back.residual, table.residual, equal_nan=True)
+    np.testing.assert_allclose(back.p_tip_map, table.p_tip_map, equal_nan=True)
+    np.testing.assert_array_equal(back.label_map, table.label_map)
 
 
 def test_contact_table_errors(tmp_path) -> None:
@@ -103,4 +107,7 @@ def test_contact_table_errors(tmp_path) -> None:
         read_contact_table(path)
     path.write_text(sample_table().to_csv().replace(",tip,", ",maybe,", 1))
     with pytest.raises(InputError, match="unknown contact labels"):
+        read_contact_table(path)
+    path.write_text(sample_table().to_csv().replace(",0.990000,", ",often,", 1))
+    with pytest.raises(InputError, match="bad value in column 'p_tip_map'"):
         read_contact_table(path)

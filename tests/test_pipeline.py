@@ -213,3 +213,20 @@ def test_same_input_gives_the_same_map():
         for key, value in a.params.items():
             np.testing.assert_array_equal(value, b.params[key])
     np.testing.assert_array_equal(out1.primitive, out2.primitive)
+
+
+def test_map_refined_labels_are_right_and_leave_fewer_ambiguous(short_lab_run):
+    """The fitted map resolves contacts eq. (2) left ambiguous, without mislabelling."""
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.report.metrics import match_contacts
+
+    run, _ = short_lab_run
+    table = reconstruct(run, B=0.02).table
+    m = np.asarray(match_contacts(table.t, run.truth))
+    ok = (m >= 0) & (table.link == run.truth.contact_link[np.maximum(m, 0)])
+    truth_tip = run.truth.is_tip[np.maximum(m, 0)]
+    decided = ok & (table.label_map != "ambiguous")
+    assert np.mean((table.label_map == "tip")[decided] == truth_tip[decided]) >= 0.95
+    amb_eq2 = np.mean(table.label[ok] == "ambiguous")
+    amb_map = np.mean(table.label_map[ok] == "ambiguous")
+    assert amb_map < 0.5 * amb_eq2, (amb_eq2, amb_map)

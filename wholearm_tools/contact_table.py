@@ -10,7 +10,9 @@ Columns (planar runs have only x and y; ``z`` columns are omitted):
 ``tip_x, tip_y[, tip_z]`` (centre of the tip sphere, or of the joint sphere at the outer end of
 an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_radius`` [m],
 ``primitive`` (id of the primitive that explains it, -1 none, empty before fitting),
-``residual`` [m] (distance to that primitive minus the radius).
+``residual`` [m] (distance to that primitive minus the radius), ``p_tip_map`` / ``label_map``
+(the tip probability and label refined by the fitted map, see
+:mod:`wholearm_tools.classify.refine`; empty before fitting).
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ class ContactTable:
     seg_a, seg_b : (M, d) float, link axis; link_radius : (M,) float
     primitive : (M,) int, -1 = unexplained (or not fitted yet)
     residual : (M,) float, NaN where unexplained
+    p_tip_map : (M,) float, tip probability refined by the fitted map (NaN before fitting)
+    label_map : (M,) str, its label (empty before fitting)
     """
 
     t: FloatArray
@@ -64,9 +68,15 @@ class ContactTable:
     link_radius: FloatArray
     primitive: NDArray[np.int64]
     residual: FloatArray
+    p_tip_map: FloatArray | None = None
+    label_map: NDArray[np.str_] | None = None
 
     def __post_init__(self) -> None:
         m = np.asarray(self.t).reshape(-1).shape[0]
+        if self.p_tip_map is None:
+            object.__setattr__(self, "p_tip_map", np.full(m, np.nan))
+        if self.label_map is None:
+            object.__setattr__(self, "label_map", np.full(m, "", dtype="<U9"))
         d = np.asarray(self.tip_center).reshape(m, -1).shape[1] if m else \
             np.asarray(self.tip_center).shape[-1]
         if d not in (2, 3):
@@ -76,7 +86,8 @@ class ContactTable:
                 "used_as_tip": (bool, (m,)), "tip_center": (float, (m, d)),
                 "tip_radius": (float, (m,)), "seg_a": (float, (m, d)), "seg_b": (float, (m, d)),
                 "link_radius": (float, (m,)), "primitive": (np.int64, (m,)),
-                "residual": (float, (m,))}
+                "residual": (float, (m,)), "p_tip_map": (float, (m,)),
+                "label_map": (np.str_, (m,))}
         for name, (dtype, shape) in spec.items():
             arr = _ro(getattr(self, name), dtype)
             if arr.size == 0 and 0 in shape:
@@ -91,6 +102,12 @@ class ContactTable:
         bad = set(self.label.tolist()) - set(LABELS)
         if bad:
             raise InputError(f"unknown contact labels {sorted(bad)}; expected {LABELS}")
+        bad = set(self.label_map.tolist()) - {*LABELS, ""}
+        if bad:
+            raise InputError(f"unknown label_map values {sorted(bad)}; expected {LABELS}")
+        pm = self.p_tip_map[np.isfinite(self.p_tip_map)]
+        if np.any((pm < 0) | (pm > 1)):
+            raise InputError("p_tip_map must lie in [0, 1]")
         if np.any((self.p_tip < 0) | (self.p_tip > 1)):
             raise InputError("p_tip must lie in [0, 1]")
         if np.any(self.variance <= 0):
@@ -107,23 +124,31 @@ class ContactTable:
         """A copy with the fit's per-contact primitive ids and residuals."""
         return replace(self, primitive=primitive, residual=residual)
 
+    def with_map_classification(self, p_tip_map: FloatArray, label_map: NDArray[np.str_]
+                                ) -> ContactTable:
+        """A copy with the tip probabilities and labels refined by the fitted map."""
+        return replace(self, p_tip_map=p_tip_map, label_map=label_map)
+
     # ------------------------------------------------------------------ CSV
     def to_csv(self) -> str:
         axes = "xyz"[: self.dim]
         header = ["t", "link", "p_tip", "label", "variance", "used_as",
                   *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
-                  *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual"]
+                  *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual",
+                  "p_tip_map", "label_map"]
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(header)
         for i in range(len(self)):
             residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
+            p_map = "" if not np.isfinite(self.p_tip_map[i]) else f"{self.p_tip_map[i]:.6f}"
             writer.writerow([
                 f"{self.t[i]:.6f}", int(self.link[i]), f"{self.p_tip[i]:.6f}", self.label[i],
                 f"{self.variance[i]:.9g}", "tip" if self.used_as_tip[i] else "link",
                 *[f"{v:.9g}" for v in self.tip_center[i]], f"{self.tip_radius[i]:.9g}",
                 *[f"{v:.9g}" for v in self.seg_a[i]], *[f"{v:.9g}" for v in self.seg_b[i]],
                 f"{self.link_radius[i]:.9g}", int(self.primitive[i]), residual,
+                p_map, self.label_map[i],
             ])
         return out.getvalue()
 
@@ -147,13 +172,19 @@ class ContactTable:
             except (TypeError, ValueError) as exc:
                 raise InputError(f"{source}: bad value in column {name!r} ({exc})") from None
 
+        def optional(name: str) -> FloatArray:
+            """A float column that may be absent or empty (NaN)."""
+            try:
+                return np.array([float(r[name]) if r.get(name) else np.nan for r in rows])
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"{source}: bad value in column {name!r} ({exc})") from None
+
         def points(prefix: str) -> FloatArray:
             return np.stack([column(f"{prefix}_{c}") for c in axes], axis=1)
 
         used = column("used_as", str)
         if not set(used.tolist()) <= {"tip", "link"}:
             raise InputError(f"{source}: column 'used_as' must be tip or link")
-        m = len(rows)
         try:
             return cls(
                 t=column("t"), link=column("link", int), p_tip=column("p_tip"),
@@ -162,8 +193,8 @@ class ContactTable:
                 tip_radius=column("tip_radius"), seg_a=points("a"), seg_b=points("b"),
                 link_radius=column("link_radius"),
                 primitive=np.array([int(r.get("primitive") or -1) for r in rows]),
-                residual=np.array([float(r["residual"]) if r.get("residual") else np.nan
-                                   for r in rows]) if "residual" in cols else np.full(m, np.nan),
+                residual=optional("residual"), p_tip_map=optional("p_tip_map"),
+                label_map=np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
             )
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools.classify.refine import MapSurface, refine_with_map
 from wholearm_tools.contact_table import ContactTable, write_contact_table
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import Run
@@ -35,6 +36,7 @@ class ReconstructParams:
     loss : robust loss of the fits ("linear", "huber", "cauchy")
     noise : residual noise level [m]; None estimates it
     free_hints : number of robot poses sampled as free-space hints for the fits
+    use_sweep : reject primitives that the robot's own motion cut through (:func:`robot_sweep`)
     """
 
     B: float = 0.02
@@ -43,6 +45,7 @@ class ReconstructParams:
     loss: str = "huber"
     noise: float | None = None
     free_hints: int = 400
+    use_sweep: bool = True
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.B) and self.B > 0):
@@ -105,6 +108,36 @@ def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> N
     a, b = robot.link_segments(q[idx])
     mid = 0.5 * (a + b)
     return np.concatenate([a, mid, b], axis=1).reshape(-1, 3)[:, : robot.dim]
+
+
+def robot_sweep(robot: RobotModel, q: NDArray[np.float64], *, step: float = 0.01) -> Any:
+    """The robot's volume over the run as capsules (:class:`wholearm_tools.fit.data.Sweep`).
+
+    Poses are kept whenever some joint moved by more than ``step`` radians since the last kept
+    one (the arm at rest or creeping adds nothing); each pose gives its link capsules and, when
+    it is wider than the last link, the tip sphere.
+    """
+    from wholearm_tools.fit.data import Sweep
+
+    q = np.asarray(q, dtype=float)
+    dim = robot.dim
+    if len(q) == 0:
+        return Sweep(np.zeros((0, dim)), np.zeros((0, dim)), np.zeros(0))
+    keep = [0]
+    last = q[0]
+    for i in range(1, len(q)):
+        if np.max(np.abs(q[i] - last)) > step:
+            keep.append(i)
+            last = q[i]
+    pts = robot.joint_positions(q[keep])[..., :dim]           # (P, n+1, d)
+    a = pts[:, :-1].reshape(-1, dim)
+    b = pts[:, 1:].reshape(-1, dim)
+    r = np.tile(robot.link_radii, len(keep))
+    if robot.tip_radius > robot.link_radii[-1]:
+        tip = pts[:, -1]
+        a, b = np.vstack([a, tip]), np.vstack([b, tip])
+        r = np.concatenate([r, np.full(len(keep), robot.tip_radius)])
+    return Sweep(a, b, r)
 
 
 #: smallest geometric noise level assumed for contacts [m] when the log gives none
@@ -187,11 +220,13 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               loss: str = "huber", noise: float | None = None,
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
+              sweep: Any = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
 
     Repeated contacts (same link, same configuration within ``3 * noise_floor``) are fitted
     once (see :func:`duplicate_groups`) and share the assignment of their representative.
+    ``sweep`` (:func:`robot_sweep`) rules out primitives the robot's own motion cut through.
     Poor data never raise: the map is then empty (or short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive, segment
@@ -219,7 +254,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     data, order = fit_data_from_table(table, free_points, rows=reps)
     need = min(MODELS[k].dof for k in kinds) + 3
     seg = segment(data, kinds=kinds, noise=noise, noise_floor=noise_floor,
-                  min_radius=0.5 * float(B))
+                  min_radius=0.5 * float(B), sweep=sweep)
     if data.n_contacts < need:
         messages.append(f"too few distinct contacts to fit a primitive: {data.n_contacts} "
                         f"given, at least {need} needed (a {kinds[0]} has "
@@ -238,15 +273,28 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     all_fits = list(seg.primitives)
     # second look: unexplained contacts whose class is uncertain, as either class
     extra, swap = _other_interpretation(table, reps, seg_rows, free_points, kinds, seg.noise,
-                                        noise_floor, B)
-    for k, (_, rows) in enumerate(extra):
-        seg_rows[np.isin(group, group[rows])] = len(all_fits) + k
-    all_fits += [fit for fit, _ in extra]
+                                        noise_floor, B, sweep)
+    from wholearm_tools.fit import residuals as fit_residuals
+
+    merged: set[int] = set()
+    for fit_x, rows, sub in extra:
+        # the same surface as a primitive already found (its other contacts were labelled
+        # the other way): those contacts join it
+        same = [j for j, p in enumerate(seg.primitives) if p.kind == fit_x.kind and np.all(
+            np.abs(fit_residuals(p.kind, p.params, sub, p.free_side)) <= 3.0 * seg.noise)]
+        if same:
+            seg_rows[np.isin(group, group[rows])] = same[0]
+            merged.add(same[0])
+        else:
+            seg_rows[np.isin(group, group[rows])] = len(all_fits)
+            all_fits.append(fit_x)
     swap = np.isin(group, group[swap])
     if extra:
+        joined = f", {len(extra) - (len(all_fits) - len(seg.primitives))} of them the same " \
+            "surface as a primitive already found" if merged else ""
         messages.append(f"{len(extra)} primitive(s) found among unexplained contacts by trying "
                         f"uncertain ones as the other class ({int(np.sum(swap))} contacts "
-                        "switched between tip and link)")
+                        f"switched between tip and link{joined})")
     # a link contact whose least clearance lies at the link's outer end touched with the
     # sphere there: it is a tip contact (tip radius, not link radius) whatever its label
     flip = np.zeros(len(table), dtype=bool)
@@ -261,7 +309,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         rows = order[links[np.asarray(t) >= 1.0 - 1e-6]]
         flip[rows[table.tip_radius[rows] != table.link_radius[rows]]] = True
     flip = np.isin(group, group[flip]) & ~table.used_as_tip
-    refit_needed: set[int] = set(range(len(seg.primitives), len(all_fits)))
+    refit_needed: set[int] = set(range(len(seg.primitives), len(all_fits))) | merged
     if np.any(flip):
         refit_needed |= set(seg_rows[flip].tolist())
         messages.append(f"{int(np.sum(flip))} link contacts touching with the link's outer "
@@ -274,6 +322,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     residual = np.full(len(table), np.nan)
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
+    surfaces: list[Any] = []  # for the map-refined classification
     n_tip = data.n_tip
     for k, fit in enumerate(all_fits):
         members = np.flatnonzero(assign_fit == k)  # sorted: tips first, then links
@@ -299,7 +348,11 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         res_of_group = dict(zip(group[rows].tolist(), fit.residuals.tolist(), strict=True))
         assignment[dup] = pid
         residual[dup] = [res_of_group[g] for g in group[dup].tolist()]
-        extent = support_extent(fit.kind, fit.params, _support_points(fit, data, members, n_tip))
+        support = _support_points(fit, data, members, n_tip)
+        extent = support_extent(fit.kind, fit.params, support)
+        surfaces.append(MapSurface(fit.primitive, float(fit.free_side),
+                                   max(float(fit.rms_residual), float(seg.noise), noise_floor),
+                                   support))
         ci95 = {k: (np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)) / 2
                 for k, (lo, hi) in fit.ci95.items()}
         primitives.append(MappedPrimitive(
@@ -322,7 +375,27 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     surface_map = SurfaceMap(planar=planar, B=float(B), primitives=tuple(primitives),
                              contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
     table = table.with_assignment(assignment, residual)
+    table = _refine_classification(table, surfaces, float(B))
+    surface_map = dataclasses.replace(surface_map, contacts={
+        **surface_map.contacts, **{f"{k}_map": int(np.sum(table.label_map == k))
+                                   for k in ("tip", "link", "ambiguous")}})
     return surface_map, tuple(fits), table, tuple(messages)
+
+
+def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
+                           ) -> ContactTable:
+    """The table with ``p_tip_map`` / ``label_map``: eq. (2) refined by the fitted surfaces
+    (:func:`wholearm_tools.classify.refine.refine_with_map`), labelled with the classifier's
+    thresholds."""
+    from wholearm_tools.classify.tip import ClassifyParams
+
+    p_map = refine_with_map(table.p_tip, table.tip_center, table.tip_radius, table.seg_a,
+                            table.seg_b, table.link_radius, surfaces,
+                            support_radius=max(0.1, 5.0 * B))
+    prm = ClassifyParams()
+    label = np.where(p_map >= prm.tip_threshold, "tip",
+                     np.where(p_map <= prm.link_threshold, "link", "ambiguous"))
+    return table.with_map_classification(p_map, label)
 
 
 #: tip probabilities between these bounds make a contact's class uncertain enough for the
@@ -332,16 +405,17 @@ UNCERTAIN_P_TIP = (0.1, 0.9)
 
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
-                          noise_floor: float, B: float,
-                          ) -> tuple[list[tuple[Any, NDArray]], NDArray]:
+                          noise_floor: float, B: float, sweep: Any = None,
+                          ) -> tuple[list[tuple[Any, NDArray, Any]], NDArray]:
     """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
     (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.
 
     A misclassified contact fits no surface as labelled; offered both ways, a primitive
     explains the right version and leaves the other unexplained (description length counts it
     as such; it costs nothing).  Returns the primitives with the table rows each explains
-    (a row explained in both versions takes the one with the smaller residual) and, per
-    table row, whether it is now used as the other class.
+    (a row explained in both versions takes the one with the smaller residual) and those
+    rows' fit data in the version it explains, and, per table row, whether it is now used as
+    the other class.
     """
     from wholearm_tools.fit import FitData, segment
     from wholearm_tools.fit.core import residuals
@@ -368,7 +442,7 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     fit_rows = np.concatenate([tr, lr])
     fit_tip = np.concatenate([np.ones(len(tr), bool), np.zeros(len(lr), bool)])
     seg = segment(data, kinds=kinds, noise=max(sigma, noise_floor, 1e-12),
-                  noise_floor=noise_floor, min_radius=0.5 * float(B))
+                  noise_floor=noise_floor, min_radius=0.5 * float(B), sweep=sweep)
     out: list[tuple[Any, NDArray]] = []
     taken = np.zeros(len(table), dtype=bool)
     for k, fit in enumerate(seg.primitives):
@@ -384,7 +458,7 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
         taken[idx] = True
         versions = np.array([keep[row] for row in idx.tolist()])
         swap[idx] = fit_tip[versions] != table.used_as_tip[idx]
-        out.append((fit, idx))
+        out.append((fit, idx, data.take(versions)))
     return out, swap
 
 
@@ -459,7 +533,8 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
     else:
         surface_map, fits, table, messages = fit_table(
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
-            noise=params.noise, free_points=hints, meta=meta, noise_floor=floor)
+            noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
+            sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None)
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

@@ -394,8 +394,9 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     (nearly) through those axes — a roll joint along its link, a push along the link).
 
     ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
-    the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of each group; the
-    torque-identified link ``lo`` when no candidate keeps any admissible boundary.
+    the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of
+    each group; the torque-identified link ``lo`` when no candidate keeps any admissible
+    boundary.
     """
     from wholearm_tools.classify.swept import swept_map
     from wholearm_tools.classify.tip import ClassifyParams, _boundary

@@ -1,0 +1,67 @@
+"""Tip probability refined by the fitted map: the surfaces decide where eq. (2) could not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wholearm_tools.classify.refine import MapSurface, refine_with_map
+from wholearm_tools.errors import InputError
+from wholearm_tools.geometry import Circle2D, Line2D
+
+WALL = Line2D([0.0, 0.5], [1.0, 0.0])  # y = 0.5, free below (normal +y: free side -1)
+SUPPORT = np.array([[x, 0.5] for x in np.linspace(-0.2, 0.2, 9)])
+SURF = [MapSurface(WALL, -1.0, 1e-3, SUPPORT)]
+
+
+def _contact(tip_y, link_y_end, w_tip=0.02, w_link=0.01):
+    """A link from (-0.3, link_y_end) ending in a tip sphere at (0, tip_y)."""
+    return {"tip_center": np.array([[0.0, tip_y]]), "tip_radius": np.array([w_tip]),
+            "seg_a": np.array([[-0.3, link_y_end]]), "seg_b": np.array([[0.0, tip_y]]),
+            "link_radius": np.array([w_link])}
+
+
+def test_tip_touching_a_fitted_wall_becomes_a_tip():
+    c = _contact(0.48, 0.40)  # the tip sphere (r 2 cm) touches y = 0.5; the link slopes away
+    p = refine_with_map(np.array([0.4]), **c, surfaces=SURF)
+    assert p[0] > 0.95  # capped by the 'surface the map does not hold' floor 1/Delta
+
+
+def test_link_tangent_to_a_fitted_wall_becomes_a_link():
+    # the link axis runs 1 cm below the wall over its length: its side touches; the tip does not
+    c = {"tip_center": np.array([[0.0, 0.49]]), "tip_radius": np.array([0.005]),
+         "seg_a": np.array([[-0.3, 0.49]]), "seg_b": np.array([[0.0, 0.49]]),
+         "link_radius": np.array([0.01])}
+    p = refine_with_map(np.array([0.5]), **c, surfaces=SURF)
+    assert p[0] < 0.05
+
+
+def test_no_surface_near_either_hypothesis_keeps_the_prior():
+    c = _contact(0.10, 0.05)  # 40 cm below the wall
+    p = refine_with_map(np.array([0.37]), **c, surfaces=SURF)
+    assert p[0] == pytest.approx(0.37)
+    # a wall known only far away (support at x = 5 m) says nothing about a contact at x = 0
+    far = [MapSurface(WALL, -1.0, 1e-3, SUPPORT + np.array([5.0, 0.0]))]
+    p = refine_with_map(np.array([0.37]), **_contact(0.48, 0.40), surfaces=far)
+    assert p[0] == pytest.approx(0.37)
+
+
+def test_hypothesis_that_would_cut_into_a_known_surface_is_ruled_out():
+    # the tip sphere touches the wall, but the link's side would then cut 5 mm into a fitted
+    # post next to it: the tip reading is impossible, whatever the prior
+    post = Circle2D([-0.15, 0.425], 0.05)
+    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    support = post.center + 0.05 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    surfaces = [*SURF, MapSurface(post, 1.0, 1e-3, support)]
+    c = {"tip_center": np.array([[0.0, 0.48]]), "tip_radius": np.array([0.02]),
+         "seg_a": np.array([[-0.3, 0.48]]), "seg_b": np.array([[0.0, 0.48]]),
+         "link_radius": np.array([0.01])}
+    assert refine_with_map(np.array([0.9]), **c, surfaces=SURF)[0] > 0.95
+    assert refine_with_map(np.array([0.9]), **c, surfaces=surfaces)[0] == 0.0
+
+
+def test_no_surfaces_and_bad_options():
+    c = _contact(0.48, 0.40)
+    assert refine_with_map(np.array([0.3]), **c, surfaces=[])[0] == pytest.approx(0.3)
+    with pytest.raises(InputError, match="support_radius"):
+        refine_with_map(np.array([0.3]), **c, surfaces=SURF, support_radius=0.0)

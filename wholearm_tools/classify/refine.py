@@ -1,0 +1,129 @@
+"""Tip probability refined by the fitted map: eq. (2) as the prior, the surfaces as evidence.
+
+Eq. (2) weighs where the contact could have happened with the swept map only.  Once primitives
+are fitted, each hypothesis also predicts a residual against them:
+
+* **tip** (or the joint sphere at the outer end of an inner link): the sphere touches a fitted
+  surface, ``r_T = min_k |s_k sd_k(P) - w_tip|``, and the link's side does not cut into any;
+* **link body**: the side is tangent to a fitted surface, ``r_L = min_k |min_t s_k sd_k(L(t)) -
+  w_link|``, and the outer sphere does not cut into any.
+
+With Gaussian residuals of the surface's noise level ``sigma_k`` and a floor ``1 / Delta`` for
+"the contact lies on a surface the map does not hold" (``Delta`` = half the link length, the
+same scale as the fit variance of :mod:`wholearm_tools.classify.tip`)::
+
+    L_H = max_k N(r_H,k; 0, sigma_k) [support] [no penetration]  +  1 / Delta
+    P_map = P_T L_T / (P_T L_T + (1 - P_T) L_L)
+
+A surface counts for a hypothesis only near the region its own contacts cover (the contact's
+point on it within ``support_radius`` of one of them): an infinite line or plane fitted to one
+wall says nothing about a point far along it.  Contacts whose two hypotheses touch the same
+surface in the same place (a sharp tip at the end of its link) keep their P_T.  The fit weights
+ambiguous contacts ~1/Δ² against 1/σ0² for certain ones, so a contact barely moves the
+surfaces it is then judged against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class MapSurface:
+    """One fitted surface as the refinement sees it.
+
+    primitive : geometry primitive (``signed_distance``, ``segment_signed_distance``)
+    free_side : +1 / -1, the side the robot is on
+    sigma : residual noise level of its contacts [m]
+    support : (K, d) points of the surface its contacts cover
+    """
+
+    primitive: object
+    free_side: float
+    sigma: float
+    support: FloatArray
+
+
+def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: FloatArray,
+                    seg_a: FloatArray, seg_b: FloatArray, link_radius: FloatArray,
+                    surfaces: Sequence[MapSurface], *, support_radius: float = 0.1,
+                    penetration: float = 3.0) -> FloatArray:
+    """Posterior tip probability of ``M`` contacts given the fitted surfaces.
+
+    Parameters
+    ----------
+    p_tip : (M,) prior tip probability (eq. 2)
+    tip_center : (M, d) centre of the outer sphere; tip_radius : (M,) its radius
+    seg_a, seg_b : (M, d) the link's axis; link_radius : (M,)
+    surfaces : fitted surfaces
+    support_radius : a surface speaks for a hypothesis only within this distance [m] of the
+        points its own contacts cover
+    penetration : a hypothesis is impossible when the other part of the link would cut into a
+        surface by more than ``penetration * sigma``
+
+    Returns
+    -------
+    (M,) float in [0, 1]; equal to ``p_tip`` where no surface speaks for either hypothesis
+    """
+    p = np.asarray(p_tip, dtype=float).reshape(-1)
+    m = p.shape[0]
+    P = np.asarray(tip_center, dtype=float).reshape(m, -1)
+    a = np.asarray(seg_a, dtype=float).reshape(m, -1)
+    b = np.asarray(seg_b, dtype=float).reshape(m, -1)
+    wt = np.asarray(tip_radius, dtype=float).reshape(m)
+    wl = np.asarray(link_radius, dtype=float).reshape(m)
+    if not (support_radius > 0 and penetration > 0):
+        raise InputError("support_radius and penetration must be positive, got "
+                         f"{support_radius}, {penetration}")
+    if m == 0 or not surfaces:
+        return p.copy()
+    delta = np.maximum(0.5 * np.linalg.norm(b - a, axis=1), 1e-6)
+    floor = 1.0 / delta
+    like_t = np.zeros(m)
+    like_l = np.zeros(m)
+    ok_t = np.ones(m, dtype=bool)
+    ok_l = np.ones(m, dtype=bool)
+    for surf in surfaces:
+        prim, fs, sig = surf.primitive, float(surf.free_side), max(float(surf.sigma), 1e-9)
+        clear_tip = fs * np.asarray(prim.signed_distance(P)) - wt       # type: ignore[attr-defined]
+        clear_seg, t = prim.segment_signed_distance(a, b, free_side=fs)  # type: ignore[attr-defined]
+        clear_link = np.asarray(clear_seg) - wl
+        x_link = a + np.asarray(t)[:, None] * (b - a)
+        near_t = _near_support(prim, P, surf.support, support_radius)
+        near_l = _near_support(prim, x_link, surf.support, support_radius)
+        # the other part of the link may not cut into the surface (where it is known)
+        ok_t &= (clear_link > -penetration * sig) | ~near_l
+        ok_l &= (clear_tip > -penetration * sig) | ~near_t
+        gauss = 1.0 / (np.sqrt(2 * np.pi) * sig)
+        like_t = np.maximum(like_t, np.where(near_t, gauss * np.exp(-0.5 * (clear_tip / sig)
+                                                                    ** 2), 0.0))
+        like_l = np.maximum(like_l, np.where(near_l, gauss * np.exp(-0.5 * (clear_link / sig)
+                                                                    ** 2), 0.0))
+    lt = (like_t + floor) * ok_t
+    ll = (like_l + floor) * ok_l
+    num = p * lt
+    den = num + (1 - p) * ll
+    out = np.where(den > 0, num / np.where(den > 0, den, 1.0), p)
+    # one and the same point (sharp tip at the end of its link): nothing to tell apart
+    same = np.isclose(lt, ll, rtol=1e-9, atol=0.0)
+    return np.clip(np.where(same, p, out), 0.0, 1.0)
+
+
+def _near_support(prim: object, x: FloatArray, support: FloatArray, radius: float
+                  ) -> NDArray[np.bool_]:
+    """Whether the point of the surface closest to each ``x`` lies within ``radius`` of the
+    surface's support points."""
+    support = np.asarray(support, dtype=float)
+    if support.size == 0:
+        return np.zeros(len(x), dtype=bool)
+    foot = np.asarray(prim.closest_point(x))                            # type: ignore[attr-defined]
+    d2 = ((foot[:, None, :] - support[None, :, :]) ** 2).sum(-1)
+    return d2.min(axis=1) <= radius * radius
