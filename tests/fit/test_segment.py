@@ -70,3 +70,33 @@ def test_segment_input_errors():
         segment(FitData.create(np.zeros((5, 2))), kinds=("plane",))
     with pytest.raises(InputError, match="noise"):
         segment(FitData.create(np.zeros((5, 2))), noise=-1.0)
+
+
+def test_sweep_violation_counts_cuts_next_to_the_support_only():
+    from wholearm_tools.fit.core import sweep_violation
+    from wholearm_tools.fit.data import Sweep
+    from wholearm_tools.geometry import Plane
+
+    floor = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    support = np.array([[x, y, 0.0] for x in (-0.1, 0.0, 0.1) for y in (-0.1, 0.0, 0.1)])
+    above = ([-0.1, 0.0, 0.05], [0.1, 0.0, 0.05], 0.02)    # 3 cm clear of the floor
+    cuts = ([-0.1, 0.05, -0.03], [0.1, 0.05, 0.03], 0.01)  # through it, next to the support
+    far = ([5.0, 0.0, -0.1], [5.0, 0.0, 0.1], 0.01)        # through it, 5 m away
+    sweep = Sweep(*[np.array(v, dtype=float) for v in zip(above, cuts, far, strict=True)])
+    bad, checked = sweep_violation(floor, 1.0, support, sweep, near=0.05, tol=1e-3)
+    assert (bad, checked) == (1, 2)
+
+
+def test_a_circle_the_robot_swept_through_is_not_a_primitive():
+    """Contacts that fit a circle exactly, but the robot's own capsules passed through its
+    inside: no surface can be there, so segmentation reports none."""
+    from wholearm_tools.fit.data import Sweep
+
+    ang = np.linspace(0.0, np.pi, 12)
+    pts = 0.1 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    data = FitData.create(tip_points=pts, tip_radius=0.0, free_points=[[0.0, 0.5]])
+    assert [p.kind for p in segment(data, kinds=("circle",), rng=0).primitives] == ["circle"]
+    xs = np.linspace(-0.08, 0.08, 9)
+    through = Sweep(np.stack([xs, np.full(9, 0.02)], 1), np.stack([xs, np.full(9, 0.06)], 1),
+                    np.full(9, 0.005))
+    assert segment(data, kinds=("circle",), rng=0, sweep=through).primitives == ()

@@ -42,7 +42,7 @@ import scipy.linalg
 import scipy.stats
 
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.data import FitData, Sweep
 from wholearm_tools.fit.models import (
     CA_OPS,
     MODELS,
@@ -551,6 +551,32 @@ def free_space_violation(kind: str, params: dict[str, Any], free_side: float, da
         return 0.0
     sd = float(free_side) * signed_distance_np(m, th, local)
     return float(np.mean(sd < 0.0))
+
+
+def sweep_violation(primitive: Any, free_side: float, support: np.ndarray, sweep: Sweep,
+                    *, near: float, tol: float) -> tuple[int, int]:
+    """How often the robot's sweep cuts into a fitted surface next to its own contacts.
+
+    A capsule of the sweep *penetrates* the primitive when its clearance
+    ``free_side * sd - radius`` falls below ``-tol``; it counts when the point of the surface
+    closest to its deepest point lies within ``near`` of a support point (the surface is
+    known there; far away the primitive's infinite extension may well cross the robot's
+    path — over the top of a post, into the branch of a junction).
+
+    Returns ``(violations, capsules checked)``.
+    """
+    idx = sweep.near(support, near)
+    if idx.size == 0:
+        return 0, 0
+    a, b, r = sweep.a[idx], sweep.b[idx], sweep.radius[idx]
+    clear, t = primitive.segment_signed_distance(a, b, free_side=float(free_side))
+    deep = np.flatnonzero(np.asarray(clear) - r < -tol)
+    if deep.size == 0:
+        return 0, int(idx.size)
+    x = a[deep] + np.asarray(t)[deep, None] * (b[deep] - a[deep])
+    foot = np.asarray(primitive.closest_point(x))
+    d2 = np.min(np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2), axis=1)
+    return int(np.count_nonzero(d2 <= near * near)), int(idx.size)
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:

@@ -46,8 +46,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.core import consensus, fit_primitive, free_space_violation, residuals
-from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.core import (
+    consensus,
+    fit_primitive,
+    free_space_violation,
+    residuals,
+    sweep_violation,
+)
+from wholearm_tools.fit.data import FitData, Sweep
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.result import FitResult
 
@@ -205,6 +211,8 @@ def segment(
     max_radius_ratio: float = 50.0,
     max_rel_std: float = 0.2,
     max_free_violation: float = 0.25,
+    sweep: Sweep | None = None,
+    sweep_near: float = 0.05,
     rng: int | np.random.Generator | None = 0,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
@@ -247,6 +255,13 @@ def segment(
     max_free_violation : float
         Largest fraction of the free-space hints next to a primitive's contacts that may lie on
         its occupied side (see :func:`~wholearm_tools.fit.core.free_space_violation`).
+    sweep : Sweep or None
+        The robot's capsules over the run.  A primitive that the sweep cuts into (deeper than
+        ``max(5 sigma, 2 mm)``) within ``sweep_near`` metres of its own contacts, more than
+        twice and in more than 1 % of the capsules checked, is not admissible: the robot was
+        there, so no surface is (see :func:`~wholearm_tools.fit.core.sweep_violation`).
+    sweep_near : float
+        See ``sweep``.
     rng : seed or Generator
         Picks the first seed; the result is deterministic for a given seed.
 
@@ -382,8 +397,25 @@ def segment(
             # a contact there would have stopped the previous link, not this one (an artefact:
             # a line through the elbow positions of tangent link contacts)
             return False
-        return members is None or free_space_violation(
-            fit.kind, fit.params, fit.free_side, data.take(members)) <= max_free_violation
+        if members is None:
+            return True
+        sub = data.take(members)
+        if free_space_violation(fit.kind, fit.params, fit.free_side, sub) > max_free_violation:
+            return False
+        if sweep is None or fit.primitive is None:
+            return True
+        return _sweep_ok(fit, sub)
+
+    def _sweep_ok(fit: FitResult, sub: FitData) -> bool:
+        prim = fit.primitive
+        pts = [sub.tip_points]
+        if sub.n_link:
+            _, t = prim.segment_signed_distance(sub.link_a, sub.link_b, free_side=fit.free_side)
+            pts.append(sub.link_a + np.asarray(t)[:, None] * (sub.link_b - sub.link_a))
+        support = np.asarray(prim.closest_point(np.vstack(pts)))
+        bad, checked = sweep_violation(prim, fit.free_side, support, sweep,
+                                       near=sweep_near, tol=max(5.0 * sigma, 2e-3))
+        return bad <= max(2, 0.01 * checked)
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
         return residuals(kind, fit.params, data, fit.free_side) / sigma
