@@ -36,7 +36,7 @@ from wholearm_tools.pipeline import Reconstruction, fit_table, position_noise_fl
 from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_surfaces
 from wholearm_tools.sim.scenarios import load_scenario
 
-SCENARIOS = ("lab_circle", "paper_planar", "paper_spatial", "well_junction")
+SCENARIOS = ("lab_circle", "lab_sharp", "paper_planar", "paper_spatial", "well_junction")
 
 
 def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
@@ -80,7 +80,11 @@ def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
               if cov[i] >= MODELS[surfaces[i].kind].dof + 2]
     found = [s for s in ev.surfaces if s.touched and s.found]
     good = [a for a in ev.primitives if a.type_correct]
+    c, cm = ev.classification, ev.classification_map
     return {
+        "link_acc": c.link_accuracy, "cls_acc": c.class_accuracy, "amb": c.ambiguous_fraction,
+        "cls_acc_map": cm.class_accuracy if cm else float("nan"),
+        "amb_map": cm.ambiguous_fraction if cm else float("nan"),
         "true": len(ev.surfaces), "touched": len(touched), "dof_cov": len(enough),
         "found": len(found), "found_kinds": sorted(s.kind for s in found),
         "n_prims": len(ev.primitives),
@@ -146,6 +150,14 @@ def main() -> None:
               f"{b['dof_cov']:>7}{b['found']:>6}{b['extra']:>6}  "
               f"{','.join(b['found_kinds']):<34}{_fmt(b['size_pct']):<16}"
               f"{_fmt(b['angle']):<18}{_fmt(b['srms_mm']):<16}")
+
+    print("\n## Classification: eq. (2) alone vs refined by the fitted map (labels right of "
+          "decided / ambiguous)\n")
+    print(f"{'scenario':<14}{'seed':>4}{'link %':>8}{'eq2 right %':>13}{'eq2 amb %':>11}"
+          f"{'map right %':>13}{'map amb %':>11}")
+    for name, seed, _, _, _, _, _, b, _, _, _ in rows:
+        print(f"{name:<14}{seed:>4}{100 * b['link_acc']:>8.1f}{100 * b['cls_acc']:>13.1f}"
+              f"{100 * b['amb']:>11.1f}{100 * b['cls_acc_map']:>13.1f}{100 * b['amb_map']:>11.1f}")
 
     print("\n## Value of link data: tip contacts only vs tip + link\n")
     print(f"{'scenario':<14}{'seed':>4}  {'found tip|both':<15}{'extra tip|both':<15}"

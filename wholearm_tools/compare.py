@@ -19,7 +19,9 @@ Row fields (``None`` where not applicable, e.g. every truth field of a real log)
 ``unexplained`` contacts no primitive explains · ``primitives`` count · ``types`` e.g.
 ``"circle=1;line=3"`` · ``truth_contacts`` ground-truth contacts · ``matched`` /
 ``false_detections`` detections paired / not paired with a truth contact · ``link_accuracy`` ·
-``class_accuracy`` (over decided labels) · ``surfaces_touched`` / ``surfaces_found`` /
+``class_accuracy`` (over decided labels) and ``ambiguous_fraction`` of eq. (2)'s labels,
+``class_accuracy_map`` / ``ambiguous_fraction_map`` of the labels refined by the fitted map ·
+``surfaces_touched`` / ``surfaces_found`` /
 ``surfaces_missed`` truth surfaces with a contact, and those recovered (or not) by a primitive
 of the right type · ``<size>_err_<type>_mean|max`` absolute size error of the right-type
 primitives: ``radius_err_circle|sphere|cylinder`` [m], ``major_radius_err_torus`` [m],
@@ -59,13 +61,16 @@ OUTPUT_NAMES = ("comparison.csv", "comparison.json", "comparison.pdf")
 LEADING_COLUMNS = (
     "log", "B", "status", "contacts", "tip", "link", "ambiguous", "unexplained", "primitives",
     "types", "truth_contacts", "matched", "false_detections", "link_accuracy", "class_accuracy",
+    "ambiguous_fraction", "class_accuracy_map", "ambiguous_fraction_map",
     "surfaces_touched", "surfaces_found", "surfaces_missed",
 )
 TRAILING_COLUMNS = ("wall_time_s", "error", "messages", "path")
 
 #: ground-truth columns (None for real logs)
 TRUTH_COLUMNS = ("truth_contacts", "matched", "false_detections", "link_accuracy",
-                 "class_accuracy", "surfaces_touched", "surfaces_found", "surfaces_missed")
+                 "class_accuracy", "ambiguous_fraction", "class_accuracy_map",
+                 "ambiguous_fraction_map", "surfaces_touched", "surfaces_found",
+                 "surfaces_missed")
 
 ReconstructFn = Callable[..., Any]
 
@@ -283,6 +288,11 @@ def truth_errors(rec: Any) -> dict[str, Any]:
         "false_detections": cls.n_false,
         "link_accuracy": cls.link_accuracy,
         "class_accuracy": cls.class_accuracy,
+        "ambiguous_fraction": cls.ambiguous_fraction,
+        "class_accuracy_map": (report.classification_map.class_accuracy
+                               if report.classification_map is not None else None),
+        "ambiguous_fraction_map": (report.classification_map.ambiguous_fraction
+                                   if report.classification_map is not None else None),
         "surfaces_touched": len(touched),
         "surfaces_found": sum(s.found for s in touched),
         "surfaces_missed": sum(not s.found for s in touched),
@@ -493,7 +503,8 @@ def _plots_figure(plt: Any, table: ComparisonTable) -> Any:
         if any(r.get("surfaces_touched") is not None for r in rows):
             axes[0, 1].plot(B, [r.get("surfaces_found") for r in rows], marker="x",
                             linestyle="--", color=colour, label=f"{log}: surfaces found")
-        for key, marker, line in (("class_accuracy", "o", "-"), ("link_accuracy", "s", "--")):
+        for key, marker, line in (("class_accuracy", "o", "-"), ("link_accuracy", "s", "--"),
+                                  ("class_accuracy_map", "^", ":")):
             ys = [_nan(r.get(key)) for r in rows]
             if not all(math.isnan(y) for y in ys):
                 axes[1, 0].plot(B, ys, marker=marker, linestyle=line, color=colour,

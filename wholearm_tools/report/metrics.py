@@ -455,6 +455,8 @@ class AccuracyReport:
     classification: ClassificationMetrics
     primitives: tuple[PrimitiveAccuracy, ...]
     surfaces: tuple[SurfaceRecovery, ...]
+    #: the labels refined by the fitted map (``label_map``); None before fitting
+    classification_map: ClassificationMetrics | None = None
 
     @property
     def n_found(self) -> int:
@@ -471,6 +473,8 @@ class AccuracyReport:
 
     def to_dict(self) -> dict[str, Any]:
         return {"classification": self.classification.to_dict(),
+                "classification_map": (None if self.classification_map is None
+                                       else self.classification_map.to_dict()),
                 "primitives": [p.to_dict() for p in self.primitives],
                 "surfaces": [s.to_dict() for s in self.surfaces],
                 "n_found": self.n_found, "n_touched": self.n_touched}
@@ -530,4 +534,10 @@ def evaluate(rec: Any, *, max_lag: float = 0.1, lead: float = 0.005,
                         found_by=tuple(a.primitive_id for a in accs
                                        if a.truth_id == s.id and a.type_correct))
         for i, s in enumerate(surfaces))
-    return AccuracyReport(cls, tuple(accs), recovery)
+    cls_map = None
+    label_map = np.asarray(getattr(table, "label_map", np.zeros(0))).astype(str)
+    if (len(label_map) and len(label_map) == len(table.t) and np.all(label_map != "")
+            and np.all(np.isfinite(table.p_tip_map))):
+        cls_map = classification_metrics(table.t, table.link, table.p_tip_map, label_map,
+                                         truth, max_lag=max_lag, lead=lead)
+    return AccuracyReport(cls, tuple(accs), recovery, cls_map)

@@ -303,6 +303,15 @@ def _ptip_colorbar(fig: Any, rect: tuple[float, float, float, float]) -> None:
 # ----------------------------------------------------------------------------- summary
 
 
+def _map_label_line(table: Any) -> list[str]:
+    """Page-one line with the labels refined by the fitted map (none before fitting)."""
+    lab = np.asarray(table.label_map).astype(str)
+    if len(lab) == 0 or np.any(lab == ""):
+        return []
+    return [f"  refined by the fitted map: tip {int(np.sum(lab == 'tip'))}, link "
+            f"{int(np.sum(lab == 'link'))}, ambiguous {int(np.sum(lab == 'ambiguous'))}"]
+
+
 def summary_lines(rec: Any, accuracy: AccuracyReport | None,
                   junction: JunctionSummary | None) -> list[str]:
     """The text of page one (also printed by the CLI)."""
@@ -319,6 +328,7 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
              f"B = {rec.params.B:g} m (smallest expected curvature radius)"
              + ("; causal classification" if rec.params.causal else ""),
              f"Contacts: {n}  (tip {n_tip}, link {n_link}, ambiguous {n_amb})",
+             *_map_label_line(table),
              "", f"Primitives found: {len(m.primitives)}"]
     shown = m.primitives[:10]
     for p in shown:
@@ -342,6 +352,9 @@ def summary_lines(rec: Any, accuracy: AccuracyReport | None,
                   f"  link identified right: {_pct(c.link_accuracy)}",
                   f"  tip/link labels right: {_pct(c.class_accuracy)} of decided "
                   f"({_pct(c.ambiguous_fraction)} ambiguous)",
+                  *([f"  refined by the map: {_pct(cm.class_accuracy)} of decided "
+                     f"({_pct(cm.ambiguous_fraction)} ambiguous)"]
+                    if (cm := accuracy.classification_map) is not None else []),
                   f"  true surfaces found: {accuracy.n_found} of {len(accuracy.surfaces)} "
                   f"({accuracy.n_touched} touched by the arm)"]
         untouched = [f"{s.truth_id} ({s.kind})" for s in accuracy.surfaces if not s.touched]
@@ -683,7 +696,11 @@ def _accuracy_pages(rec: Any, acc: AccuracyReport) -> list[Any]:
         f"link identified right    {_pct(c.link_accuracy)} ({c.link_correct}/{c.n_matched})",
         f"tip/link labels right    {_pct(c.class_accuracy)} of {c.n_decided} decided",
         f"ambiguous                {_pct(c.ambiguous_fraction)}",
-        f"Brier score of P_T       {_opt(c.brier, '{:.3f}')}"])
+        f"Brier score of P_T       {_opt(c.brier, '{:.3f}')}",
+        *([f"refined by the map:      {_pct(cm.class_accuracy)} right of {cm.n_decided} "
+           f"decided,", f"                         {_pct(cm.ambiguous_fraction)} ambiguous, "
+           f"Brier {_opt(cm.brier, '{:.3f}')}"]
+          if (cm := acc.classification_map) is not None else [])])
     fig.text(0.06, 0.87, text, fontsize=8.5, family="DejaVu Sans Mono", va="top")
     ax = fig.add_axes((0.56, 0.10, 0.38, 0.72))
     ok = np.asarray(c.bin_count) > 0
