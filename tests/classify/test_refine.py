@@ -65,3 +65,15 @@ def test_no_surfaces_and_bad_options():
     assert refine_with_map(np.array([0.3]), **c, surfaces=[])[0] == pytest.approx(0.3)
     with pytest.raises(InputError, match="support_radius"):
         refine_with_map(np.array([0.3]), **c, surfaces=SURF, support_radius=0.0)
+
+
+def test_inside_a_bore_only_the_end_sphere_can_touch():
+    """A straight link inside a round bore is closest to the wall at an end: a contact there is
+    the end sphere's (tip or joint) even when the sphere is no wider than the link."""
+    bore = Circle2D([0.0, 0.0], 0.16)
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    surfaces = [MapSurface(bore, -1.0, 1e-3, 0.16 * np.stack([np.cos(ang), np.sin(ang)], 1))]
+    c = {"tip_center": np.array([[0.14, 0.0]]), "tip_radius": np.array([0.02]),
+         "seg_a": np.array([[0.0, 0.02]]), "seg_b": np.array([[0.14, 0.0]]),
+         "link_radius": np.array([0.02])}
+    assert refine_with_map(np.array([0.4]), **c, surfaces=surfaces)[0] > 0.95

@@ -6,7 +6,9 @@ are fitted, each hypothesis also predicts a residual against them:
 * **tip** (or the joint sphere at the outer end of an inner link): the sphere touches a fitted
   surface, ``r_T = min_k |s_k sd_k(P) - w_tip|``, and the link's side does not cut into any;
 * **link body**: the side is tangent to a fitted surface, ``r_L = min_k |min_t s_k sd_k(L(t)) -
-  w_link|``, and the outer sphere does not cut into any.
+  w_link|`` with the least clearance strictly inside the segment (at its outer end the side
+  *is* the end sphere; inside a bore a straight link's least clearance is always at an end),
+  and the outer sphere does not cut into any.
 
 With Gaussian residuals of the surface's noise level ``sigma_k`` and a floor ``1 / Delta`` for
 "the contact lies on a surface the map does not hold" (``Delta`` = half the link length, the
@@ -17,7 +19,8 @@ same scale as the fit variance of :mod:`wholearm_tools.classify.tip`)::
 
 A surface counts for a hypothesis only near the region its own contacts cover (the contact's
 point on it within ``support_radius`` of one of them): an infinite line or plane fitted to one
-wall says nothing about a point far along it.  Contacts whose two hypotheses touch the same
+wall says nothing about a point far along it; it rules a hypothesis out only right where it is
+known (``cut_radius``): next to a junction one bore's extension runs through the other.  Contacts whose two hypotheses touch the same
 surface in the same place (a sharp tip at the end of its link) keep their P_T.  The fit weights
 ambiguous contacts ~1/Δ² against 1/σ0² for certain ones, so a contact barely moves the
 surfaces it is then judged against.
@@ -55,7 +58,7 @@ class MapSurface:
 def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: FloatArray,
                     seg_a: FloatArray, seg_b: FloatArray, link_radius: FloatArray,
                     surfaces: Sequence[MapSurface], *, support_radius: float = 0.1,
-                    penetration: float = 3.0) -> FloatArray:
+                    cut_radius: float = 0.015, penetration: float = 3.0) -> FloatArray:
     """Posterior tip probability of ``M`` contacts given the fitted surfaces.
 
     Parameters
@@ -66,6 +69,9 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
     surfaces : fitted surfaces
     support_radius : a surface speaks for a hypothesis only within this distance [m] of the
         points its own contacts cover
+    cut_radius : ... and it rules a hypothesis out (see ``penetration``) only within this
+        distance [m] of those points: next to a junction the infinite extension of one bore
+        runs through the other, where the robot is
     penetration : a hypothesis is impossible when the other part of the link would cut into a
         surface by more than ``penetration * sigma``
 
@@ -80,9 +86,9 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
     b = np.asarray(seg_b, dtype=float).reshape(m, -1)
     wt = np.asarray(tip_radius, dtype=float).reshape(m)
     wl = np.asarray(link_radius, dtype=float).reshape(m)
-    if not (support_radius > 0 and penetration > 0):
-        raise InputError("support_radius and penetration must be positive, got "
-                         f"{support_radius}, {penetration}")
+    if not (support_radius > 0 and cut_radius > 0 and penetration > 0):
+        raise InputError("support_radius, cut_radius and penetration must be positive, got "
+                         f"{support_radius}, {cut_radius}, {penetration}")
     if m == 0 or not surfaces:
         return p.copy()
     delta = np.maximum(0.5 * np.linalg.norm(b - a, axis=1), 1e-6)
@@ -96,17 +102,29 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
         clear_tip = fs * np.asarray(prim.signed_distance(P)) - wt       # type: ignore[attr-defined]
         clear_seg, t = prim.segment_signed_distance(a, b, free_side=fs)  # type: ignore[attr-defined]
         clear_link = np.asarray(clear_seg) - wl
-        x_link = a + np.asarray(t)[:, None] * (b - a)
+        t = np.asarray(t)
+        x_link = a + t[:, None] * (b - a)
+        # the side touches only where its least clearance is inside the segment: at the outer
+        # end it is the end sphere (the tip / joint reading), at the inner end the joint the
+        # link turns about (which would have stopped the link before); inside a concave
+        # surface (a bore) the least clearance of a straight link is always at an end
+        side = (t > 1e-6) & (t < 1.0 - 1e-6)
+        # ... or the whole side lies flush (a link along a wall: both ends equally close)
+        ends = fs * np.asarray(prim.signed_distance(np.vstack([a, b])))  # type: ignore[attr-defined]
+        side |= np.abs(ends[:m] - ends[m:]) <= sig
         near_t = _near_support(prim, P, surf.support, support_radius)
         near_l = _near_support(prim, x_link, surf.support, support_radius)
-        # the other part of the link may not cut into the surface (where it is known)
-        ok_t &= (clear_link > -penetration * sig) | ~near_l
-        ok_l &= (clear_tip > -penetration * sig) | ~near_t
+        # the other part of the link may not cut into the surface (right where it is known)
+        ok_t &= ((clear_link > -penetration * sig)
+                 | ~_near_support(prim, x_link, surf.support, cut_radius))
+        ok_l &= ((clear_tip > -penetration * sig)
+                 | ~_near_support(prim, P, surf.support, cut_radius))
         gauss = 1.0 / (np.sqrt(2 * np.pi) * sig)
         like_t = np.maximum(like_t, np.where(near_t, gauss * np.exp(-0.5 * (clear_tip / sig)
                                                                     ** 2), 0.0))
-        like_l = np.maximum(like_l, np.where(near_l, gauss * np.exp(-0.5 * (clear_link / sig)
-                                                                    ** 2), 0.0))
+        like_l = np.maximum(like_l, np.where(near_l & side,
+                                             gauss * np.exp(-0.5 * (clear_link / sig) ** 2),
+                                             0.0))
     lt = (like_t + floor) * ok_t
     ll = (like_l + floor) * ok_l
     num = p * lt

@@ -212,7 +212,7 @@ def segment(
     max_rel_std: float = 0.2,
     max_free_violation: float = 0.25,
     sweep: Sweep | None = None,
-    sweep_near: float = 0.05,
+    sweep_near: float = 0.015,
     rng: int | np.random.Generator | None = 0,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
