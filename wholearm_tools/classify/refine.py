@@ -22,8 +22,8 @@ point on it within ``support_radius`` of one of them): an infinite line or plane
 wall says nothing about a point far along it; it rules a hypothesis out only right where it is
 known (``cut_radius``): next to a junction one bore's extension runs through the other.
 Contacts whose two hypotheses touch the same surface in the same place (a sharp tip at the end
-of its link) keep their P_T.  The fit weights ambiguous contacts ~1/Δ² against 1/σ0² for certain ones, so a contact barely moves the
-surfaces it is then judged against.
+of its link) keep their P_T.  The fit weights ambiguous contacts ~1/Δ² against 1/σ0² for
+certain ones, so a contact barely moves the surfaces it is then judged against.
 """
 
 from __future__ import annotations
