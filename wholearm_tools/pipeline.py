@@ -220,13 +220,15 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               loss: str = "huber", noise: float | None = None,
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
-              sweep: Any = None,
+              sweep: Any = None, base: NDArray | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
 
     Repeated contacts (same link, same configuration within ``3 * noise_floor``) are fitted
     once (see :func:`duplicate_groups`) and share the assignment of their representative.
-    ``sweep`` (:func:`robot_sweep`) rules out primitives the robot's own motion cut through.
+    ``sweep`` (:func:`robot_sweep`) rules out primitives the robot's own motion cut through,
+    ``base`` (the robot's base point) circles and spheres with free space inside that do not
+    hold it.
     Poor data never raise: the map is then empty (or short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive, segment
@@ -254,7 +256,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     data, order = fit_data_from_table(table, free_points, rows=reps)
     need = min(MODELS[k].dof for k in kinds) + 3
     seg = segment(data, kinds=kinds, noise=noise, noise_floor=noise_floor,
-                  min_radius=0.5 * float(B), sweep=sweep)
+                  min_radius=0.5 * float(B), sweep=sweep, base=base)
     if data.n_contacts < need:
         messages.append(f"too few distinct contacts to fit a primitive: {data.n_contacts} "
                         f"given, at least {need} needed (a {kinds[0]} has "
@@ -273,7 +275,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     all_fits = list(seg.primitives)
     # second look: unexplained contacts whose class is uncertain, as either class
     extra, swap = _other_interpretation(table, reps, seg_rows, free_points, kinds, seg.noise,
-                                        noise_floor, B, sweep)
+                                        noise_floor, B, sweep, base)
     from wholearm_tools.fit import residuals as fit_residuals
 
     merged: set[int] = set()
@@ -406,6 +408,7 @@ UNCERTAIN_P_TIP = (0.1, 0.9)
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
                           noise_floor: float, B: float, sweep: Any = None,
+                          base: NDArray | None = None,
                           ) -> tuple[list[tuple[Any, NDArray, Any]], NDArray]:
     """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
     (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.
@@ -442,7 +445,7 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     fit_rows = np.concatenate([tr, lr])
     fit_tip = np.concatenate([np.ones(len(tr), bool), np.zeros(len(lr), bool)])
     seg = segment(data, kinds=kinds, noise=max(sigma, noise_floor, 1e-12),
-                  noise_floor=noise_floor, min_radius=0.5 * float(B), sweep=sweep)
+                  noise_floor=noise_floor, min_radius=0.5 * float(B), sweep=sweep, base=base)
     out: list[tuple[Any, NDArray]] = []
     taken = np.zeros(len(table), dtype=bool)
     for k, fit in enumerate(seg.primitives):
@@ -534,7 +537,8 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
         surface_map, fits, table, messages = fit_table(
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
-            sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None)
+            sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None,
+            base=run.robot.joint_positions(np.zeros(run.robot.dof))[0, : run.robot.dim])
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

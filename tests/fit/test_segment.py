@@ -100,3 +100,15 @@ def test_a_circle_the_robot_swept_through_is_not_a_primitive():
     through = Sweep(np.stack([xs, np.full(9, 0.02)], 1), np.stack([xs, np.full(9, 0.06)], 1),
                     np.full(9, 0.005))
     assert segment(data, kinds=("circle",), rng=0, sweep=through).primitives == ()
+
+
+def test_an_enclosure_must_hold_the_robot_base():
+    """Contacts on the inside of a circle (free space inside) are an enclosure around the arm
+    only if the arm's base is inside it too: an arm based outside reached them through walls."""
+    ang = np.linspace(0.0, 1.5 * np.pi, 14)
+    pts = np.array([1.0, 0.0]) + 0.08 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    data = FitData.create(tip_points=pts, tip_radius=0.0, free_points=[[1.0, 0.0]])
+    inside = segment(data, kinds=("circle",), rng=0, base=[1.0, 0.02])
+    assert [p.kind for p in inside.primitives] == ["circle"]
+    assert inside.primitives[0].free_side == -1
+    assert segment(data, kinds=("circle",), rng=0, base=[0.0, 0.0]).primitives == ()

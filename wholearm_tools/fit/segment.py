@@ -26,7 +26,12 @@
    huge sphere that is really a plane, is not a primitive) and a support that constrains every
    degree of freedom: the standard deviation of the worst-determined parameter combination
    (:attr:`FitResult.sensitivity` x ``sigma``, in units of the support's spread) must stay below
-   ``max_rel_std`` (at noise ``max(sigma, 1e-4 x scene size)``).  Link contacts that all touch
+   ``max_rel_std`` (at noise ``max(sigma, id_noise x scene size)``, 1e-4 by default; 1e-3
+   also rejects the weakly determined posts of paper_spatial, which then come out as planes).
+   A circle or sphere whose inside is free space must hold the robot's ``base``: the arm
+   reaches every contact from its base through free space, so it cannot be enclosed by a
+   closed surface its base lies outside of (a ring of contacts in a bore fits a sphere as well
+   as the bore's cylinder).  Link contacts that all touch
    at one point (every contact of the first link starts at the base), or tangent lines from one
    point to a circle, leave a direction free and are rejected here.
 6. **Assignment**: sigma is re-estimated from every contact's smallest residual under the
@@ -44,6 +49,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.core import (
@@ -210,9 +216,11 @@ def segment(
     min_radius: float = 0.0,
     max_radius_ratio: float = 50.0,
     max_rel_std: float = 0.2,
+    id_noise: float = 1e-4,
     max_free_violation: float = 0.25,
     sweep: Sweep | None = None,
     sweep_near: float = 0.015,
+    base: ArrayLike | None = None,
     rng: int | np.random.Generator | None = 0,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
@@ -251,7 +259,9 @@ def segment(
         Largest admissible radius in units of the support's RMS spread.
     max_rel_std : float
         Largest standard deviation of the worst-determined parameter combination, in units of
-        the support's spread, at noise ``max(sigma, 1e-4 x scene size)``.
+        the support's spread, at noise ``max(sigma, id_noise x scene size)``.
+    id_noise : float
+        See ``max_rel_std``.
     max_free_violation : float
         Largest fraction of the free-space hints next to a primitive's contacts that may lie on
         its occupied side (see :func:`~wholearm_tools.fit.core.free_space_violation`).
@@ -262,6 +272,8 @@ def segment(
         there, so no surface is (see :func:`~wholearm_tools.fit.core.sweep_violation`).
     sweep_near : float
         See ``sweep``.
+    base : (d,) point or None
+        The robot's base; see ``max_rel_std``.
     rng : seed or Generator
         Picks the first seed; the result is deterministic for a given seed.
 
@@ -367,8 +379,9 @@ def segment(
     else:
         sigma = float(noise)
         sigma_seed_low = math.inf
-    sigma_id = max(sigma, 1e-4 * extent)
+    sigma_id = max(sigma, id_noise * extent)
     sigma_seed = sigma
+    base_pt = None if base is None else np.asarray(base, dtype=float).reshape(data.dim)
     trim_ok = True
     # inlier tolerance of the algebraic (RANSAC) seed guesses: well above the noise, well
     # below the misfit of a contact from another surface or with the wrong label
@@ -396,6 +409,10 @@ def segment(
             # is the joint the link turns about, which does not move when the link turns, so
             # a contact there would have stopped the previous link, not this one (an artefact:
             # a line through the elbow positions of tangent link contacts)
+            return False
+        if (base_pt is not None and fit.kind in ("circle", "sphere") and fit.free_side < 0
+                and fit.primitive is not None
+                and float(fit.primitive.signed_distance(base_pt[None])[0]) > 0):
             return False
         if members is None:
             return True
@@ -484,7 +501,7 @@ def segment(
                                 _floor_cap(noise_floor, sigma_seed_low)),
                             float(noise_floor),
                             1e-6 * extent)
-                sigma_id = max(sigma, 1e-4 * extent)
+                sigma_id = max(sigma, id_noise * extent)
     grow_all(seeds, seed_fits)
     # second round: seeds among the contacts no hypothesis covers (a second surface whose
     # contacts the farthest-point seeds missed, e.g. a lateral branch next to a main bore)
@@ -554,7 +571,7 @@ def segment(
                              for h in final]), axis=0)
         sigma = max(_truncated_sigma(R, sigma, k_sigma), float(noise_floor), 1e-6 * extent)
         sigma = min(sigma, _floor_cap(noise_floor, sigma_seed_low))
-        sigma_id = max(sigma, 1e-4 * extent)
+        sigma_id = max(sigma, id_noise * extent)
     merged = True
     while merged and len(final) > 1:  # two primitives where one explains the data -> one
         merged = False
