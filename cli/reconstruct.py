@@ -27,6 +27,9 @@ def summary_lines(rec) -> list[str]:
     lines = [f"contacts: {c.get('count', 0)} (tip {c.get('tip', 0)}, link {c.get('link', 0)}, "
              f"ambiguous {c.get('ambiguous', 0)}, unexplained {c.get('unexplained', 0)}); "
              f"B = {m.B:g} m"]
+    if "tip_map" in c:
+        lines.append(f"  refined by the fitted map: tip {c['tip_map']}, link {c['link_map']}, "
+                     f"ambiguous {c['ambiguous_map']}")
     for p in m.primitives:
         size = {k: v for k, v in p.params.items() if k in ("radius", "major_radius",
                                                             "minor_radius", "half_angle")}
