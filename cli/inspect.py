@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import click
+import numpy as np
 
 from cli.options import json_option
 
@@ -24,6 +25,7 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     from wholearm_tools.logs.inspect import inspect_log
 
     info = inspect_log(run, joint_topic=joint_topic)
+    info["contacts_found"] = _contacts_found(run, info, joint_topic)
     if as_json:
         click.echo(json.dumps(info, indent=2, sort_keys=True))
         return
@@ -58,8 +60,53 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     gt = info["ground_truth"]
     out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body),"
                                 f" {gt['surfaces']} surfaces" if gt else "no"))
+    found = info["contacts_found"]
+    if found is not None:
+        if "error" in found:
+            out.append(f"contacts:  not detected ({found['error']})")
+        else:
+            links = ", ".join(f"link {k}: {v}" for k, v in found["per_link"].items()) or "none"
+            line = f"contacts:  {found['count']} detected ({links})"
+            if found.get("matched") is not None:
+                line += (f"; {found['matched']} match a true contact, "
+                         f"{found['link_right']} on the true link")
+            out.append(line)
     if info["metadata"]:
         out.append(f"metadata:  {', '.join(info['metadata'])}")
     if info["attachments"]:
         out.append(f"attachments: {', '.join(info['attachments'])}")
     click.echo("\n".join(out))
+
+
+def _contacts_found(run: Path, info: dict, joint_topic: str | None) -> dict | None:
+    """Contacts detected in the log (needs commanded torques; the URDF, when usable, for the
+    rigid-group choice); ``None`` when the log has no torques to detect them from."""
+    from wholearm_tools.contacts import detect_contacts, match_truth
+    from wholearm_tools.errors import WholearmError
+    from wholearm_tools.logs import read_joint_log, read_run
+
+    cmd = info.get("commands")
+    if not cmd or not cmd.get("torques") or info.get("joint_topic") is None:
+        return None
+    robot_ok = bool(info.get("robot")) and "error" not in info["robot"]
+    try:
+        if robot_ok:
+            r = read_run(run, joint_topic=joint_topic, require_commands=True)
+            log, robot, truth = r.log, r.robot, r.truth
+        else:
+            log = read_joint_log(run, joint_topic=joint_topic, require_commands=True)
+            robot, truth = None, None
+        c = detect_contacts(log, robot)
+    except WholearmError as exc:
+        return {"error": str(exc)}
+    links, counts = np.unique(np.asarray(c.link), return_counts=True)
+    out: dict = {"count": len(c), "per_link": {int(k): int(v) for k, v in zip(links, counts,
+                                                                            strict=True)},
+                 "matched": None, "link_right": None}
+    if truth is not None:
+        m = match_truth(c, truth)
+        ok = m >= 0
+        out["matched"] = int(ok.sum())
+        out["link_right"] = int(np.sum(np.asarray(c.link)[ok]
+                                       == np.asarray(truth.contact_link)[m[ok]]))
+    return out

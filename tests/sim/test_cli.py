@@ -93,3 +93,16 @@ def test_existing_output_needs_overwrite(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     assert out.read_bytes() != b"keep"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.mcap"]
+
+
+def test_inspect_shows_the_contacts_found(tmp_path: Path) -> None:
+    out = tmp_path / "run.mcap"
+    assert run("simulate", "lab_sharp", "-o", str(out), "--duration", "10").exit_code == 0
+    res = run("inspect", str(out), "--json")
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.output)
+    found = info["contacts_found"]
+    assert found["count"] == info["ground_truth"]["contacts"] > 0
+    assert found["matched"] == found["link_right"] == found["count"]
+    text = run("inspect", str(out)).output
+    assert f"contacts:  {found['count']} detected" in text
