@@ -140,8 +140,8 @@ class ComparisonTable:
     def summary_rows(self) -> tuple[list[str], list[list[str]]]:
         """Header and cells of the compact table printed by the CLI and drawn in the PDF."""
         header = ["log", "B [m]", "contacts", "tip", "link", "amb", "prims", "types", "link acc",
-                  "class acc", "found/touched", "radius err [mm]", "axis err [deg]", "time [s]",
-                  "status"]
+                  "class acc", "map acc", "map amb", "found/touched", "radius err [mm]",
+                  "axis err [deg]", "time [s]", "status"]
         cells = []
         for row in self.rows:
             radius = _mean_of(row, "radius_err_", "_mean")
@@ -154,7 +154,9 @@ class ComparisonTable:
                 row["log"], f"{row['B']:g}", _fmt(row.get("contacts")), _fmt(row.get("tip")),
                 _fmt(row.get("link")), _fmt(row.get("ambiguous")), _fmt(row.get("primitives")),
                 row.get("types") or "", _fmt(row.get("link_accuracy"), ".2f"),
-                _fmt(row.get("class_accuracy"), ".2f"), found,
+                _fmt(row.get("class_accuracy"), ".2f"),
+                _fmt(row.get("class_accuracy_map"), ".2f"),
+                _fmt(row.get("ambiguous_fraction_map"), ".2f"), found,
                 _fmt(None if radius is None else radius * 1e3, ".2f"), _fmt(axis, ".2f"),
                 _fmt(row.get("wall_time_s"), ".2f"), status,
             ])
