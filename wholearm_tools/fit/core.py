@@ -139,7 +139,7 @@ def _problem(kind: str, loss: str, nt: int, nl: int, max_iter: int) -> Any:
     opts = {
         "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
         "ipopt.max_iter": max_iter, "ipopt.tol": 1e-12, "ipopt.acceptable_tol": 1e-9,
-        "ipopt.acceptable_iter": 10, "expand": True,
+        "ipopt.acceptable_iter": 10, "ipopt.mu_strategy": "adaptive", "expand": True,
     }
     return ca.nlpsol(f"fit_{kind}_{loss}_{nt}_{nl}", "ipopt",
                      {"x": S["x"], "p": S["P"], "f": f, "g": g}, opts)

@@ -210,7 +210,7 @@ def segment(
     neighbours: int = 6,
     min_support: int | None = None,
     seed_accept: float = 2.5,
-    seed_max_iter: int = 60,
+    seed_max_iter: int = 30,
     trim_extra: int = 7,
     noise_floor: float = 0.0,
     min_radius: float = 0.0,
