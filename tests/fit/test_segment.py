@@ -112,3 +112,16 @@ def test_an_enclosure_must_hold_the_robot_base():
     assert [p.kind for p in inside.primitives] == ["circle"]
     assert inside.primitives[0].free_side == -1
     assert segment(data, kinds=("circle",), rng=0, base=[0.0, 0.0]).primitives == ()
+
+
+def test_determined_at_a_noise_level():
+    """A circle on a short arc is determined at micrometre noise but not at centimetres: the
+    pipeline reports a primitive only when it is determined at a realistic noise level."""
+    ang = np.linspace(0.0, 0.6, 10)
+    pts = 0.2 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    data = FitData.create(tip_points=pts, tip_radius=0.0, free_points=[[0.0, 0.0]])
+    seg = segment(data, kinds=("circle",), rng=0)
+    assert len(seg.primitives) == 1
+    fit = seg.primitives[0]
+    assert seg.determined(fit, 1e-6)
+    assert not seg.determined(fit, 1e-1)

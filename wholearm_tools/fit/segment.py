@@ -91,6 +91,15 @@ class Segmentation:
     assignment: np.ndarray
     noise: float
     description_length: float
+    #: scene size (metres) and ``max_rel_std`` used for identifiability (see :func:`segment`)
+    extent: float = 0.0
+    max_rel_std: float = math.inf
+
+    def determined(self, fit: FitResult, id_noise: float) -> bool:
+        """Whether every parameter of ``fit`` is determined by its contacts at noise
+        ``max(noise, id_noise x scene size)`` (the identifiability rule of :func:`segment`)."""
+        sigma_id = max(self.noise, id_noise * self.extent)
+        return bool(fit.sensitivity * sigma_id <= self.max_rel_std)
 
     def __post_init__(self) -> None:
         self.assignment.flags.writeable = False
@@ -622,4 +631,5 @@ def segment(
         idx = assignment == i
         z = zres(h.kind, h.fit)[idx]
         dl += float(np.sum(0.5 * z * z)) + 0.5 * MODELS[h.kind].dof * math.log(n)
-    return Segmentation(tuple(h.fit for h in final), assignment.astype(int), sigma, dl)
+    return Segmentation(tuple(h.fit for h in final), assignment.astype(int), sigma, dl,
+                        extent, max_rel_std)
