@@ -61,12 +61,18 @@ def run_seed(seed: int, duration: float | None, B: float | None) -> dict:
             azimuth_true=j.window_azimuth_deg.truth)
     else:
         acc = evaluate(rec)
-        main = [a for a in acc.primitives if a.truth_id == 0 and a.type_correct]
-        if main:
-            best = max(main, key=lambda a: a.n_support)
-            row.update(main_d=2 * best.size_fit, main_d_true=2 * best.size_true)
-        row["note"] = ("lateral never touched by the exploration" if per_surface[1] == 0 else
-                       f"lateral touched {per_surface[1]}x but not fitted")
+        found = {}
+        for sid, key in ((0, "main_d"), (1, "lat_d")):
+            right = [a for a in acc.primitives if a.truth_id == sid and a.type_correct]
+            if right:
+                best = max(right, key=lambda a: a.n_support)
+                row.update({key: 2 * best.size_fit, f"{key}_true": 2 * best.size_true})
+            found[sid] = bool(right)
+        missing = [(name, int(per_surface[sid])) for sid, name in ((0, "main bore"),
+                                                                    (1, "lateral"))
+                   if not found[sid]]
+        row["note"] = "; ".join(f"{name} never touched by the exploration" if n == 0 else
+                                f"{name} touched {n}x but not fitted" for name, n in missing)
     row["main_err_pct"] = _pct(row.get("main_d"), row.get("main_d_true"))
     row["lat_err_pct"] = _pct(row.get("lat_d"), row.get("lat_d_true"))
     row["angle_err"] = (row["angle"] - row["angle_true"]) if "angle" in row else None
