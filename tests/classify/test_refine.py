@@ -77,3 +77,33 @@ def test_inside_a_bore_only_the_end_sphere_can_touch():
          "seg_a": np.array([[0.0, 0.02]]), "seg_b": np.array([[0.14, 0.0]]),
          "link_radius": np.array([0.02])}
     assert refine_with_map(np.array([0.4]), **c, surfaces=surfaces)[0] > 0.95
+
+
+def test_a_link_resting_on_the_lip_between_two_bores_is_a_link_contact():
+    """Two bores with free space inside meet at a lip; a straight link inside their union whose
+    side rests on the lip touches neither infinite circle, but the union's boundary."""
+    main, branch = Circle2D([0.0, 0.0], 0.16), Circle2D([0.2, 0.0], 0.11)
+
+    def ring(c, r):
+        ang = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        return np.asarray(c) + r * np.stack([np.cos(ang), np.sin(ang)], 1)
+
+    surfaces = [MapSurface(main, -1.0, 1e-4, ring([0.0, 0.0], 0.16)),
+                MapSurface(branch, -1.0, 1e-4, ring([0.2, 0.0], 0.11))]
+    xs = np.linspace(0.02, 0.25, 4001)
+
+    def union_clearance(y):
+        pts = np.stack([xs, np.full_like(xs, y)], 1)
+        return np.max([-main.signed_distance(pts), -branch.signed_distance(pts)], 0).min()
+
+    lo, hi = 0.0, 0.0878  # bisection: the height at which the link's side just touches the lip
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if union_clearance(mid) > 0.01 else (lo, mid)
+    y = 0.5 * (lo + hi)
+    c = {"tip_center": np.array([[0.25, y]]), "tip_radius": np.array([0.01]),
+         "seg_a": np.array([[0.02, y]]), "seg_b": np.array([[0.25, y]]),
+         "link_radius": np.array([0.01])}
+    assert refine_with_map(np.array([0.5]), **c, surfaces=surfaces)[0] < 0.05
+    # either bore alone cannot explain it: the link crosses its infinite circle at the window
+    assert refine_with_map(np.array([0.5]), **c, surfaces=surfaces[:1])[0] == pytest.approx(0.5)

@@ -97,12 +97,11 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
     like_l = np.zeros(m)
     ok_t = np.ones(m, dtype=bool)
     ok_l = np.ones(m, dtype=bool)
-    for surf in surfaces:
-        prim, fs, sig = surf.primitive, float(surf.free_side), max(float(surf.sigma), 1e-9)
-        clear_tip = fs * np.asarray(prim.signed_distance(P)) - wt       # type: ignore[attr-defined]
-        clear_seg, t = prim.segment_signed_distance(a, b, free_side=fs)  # type: ignore[attr-defined]
-        clear_link = np.asarray(clear_seg) - wl
-        t = np.asarray(t)
+    for view in _views(surfaces):
+        sig = view.sigma
+        clear_tip = view.clearance(P) - wt
+        clear_seg, t = view.segment_clearance(a, b)
+        clear_link = clear_seg - wl
         x_link = a + t[:, None] * (b - a)
         # the side touches only where its least clearance is inside the segment: at the outer
         # end it is the end sphere (the tip / joint reading), at the inner end the joint the
@@ -110,15 +109,13 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
         # surface (a bore) the least clearance of a straight link is always at an end
         side = (t > 1e-6) & (t < 1.0 - 1e-6)
         # ... or the whole side lies flush (a link along a wall: both ends equally close)
-        ends = fs * np.asarray(prim.signed_distance(np.vstack([a, b])))  # type: ignore[attr-defined]
+        ends = view.clearance(np.vstack([a, b]))
         side |= np.abs(ends[:m] - ends[m:]) <= sig
-        near_t = _near_support(prim, P, surf.support, support_radius)
-        near_l = _near_support(prim, x_link, surf.support, support_radius)
+        near_t = view.near(P, support_radius)
+        near_l = view.near(x_link, support_radius)
         # the other part of the link may not cut into the surface (right where it is known)
-        ok_t &= ((clear_link > -penetration * sig)
-                 | ~_near_support(prim, x_link, surf.support, cut_radius))
-        ok_l &= ((clear_tip > -penetration * sig)
-                 | ~_near_support(prim, P, surf.support, cut_radius))
+        ok_t &= (clear_link > -penetration * sig) | ~view.near(x_link, cut_radius)
+        ok_l &= (clear_tip > -penetration * sig) | ~view.near(P, cut_radius)
         gauss = 1.0 / (np.sqrt(2 * np.pi) * sig)
         like_t = np.maximum(like_t, np.where(near_t, gauss * np.exp(-0.5 * (clear_tip / sig)
                                                                     ** 2), 0.0))
@@ -145,3 +142,62 @@ def _near_support(prim: object, x: FloatArray, support: FloatArray, radius: floa
     foot = np.asarray(prim.closest_point(x))                            # type: ignore[attr-defined]
     d2 = ((foot[:, None, :] - support[None, :, :]) ** 2).sum(-1)
     return d2.min(axis=1) <= radius * radius
+
+
+#: surface types that enclose the arm when their free side is inside
+_ENCLOSING = ("circle", "sphere", "cylinder", "cone", "torus")
+
+
+class _View:
+    """One fitted surface as the refinement queries it (clearances on its free side)."""
+
+    def __init__(self, surf: MapSurface) -> None:
+        self.surfaces = (surf,)
+        self.sigma = max(float(surf.sigma), 1e-9)
+
+    def clearance(self, x: FloatArray) -> FloatArray:
+        s = self.surfaces[0]
+        return float(s.free_side) * np.asarray(s.primitive.signed_distance(x))  # type: ignore[attr-defined]
+
+    def segment_clearance(self, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+        s = self.surfaces[0]
+        val, t = s.primitive.segment_signed_distance(  # type: ignore[attr-defined]
+            a, b, free_side=float(s.free_side))
+        return np.asarray(val), np.asarray(t)
+
+    def near(self, x: FloatArray, radius: float) -> NDArray[np.bool_]:
+        out = np.zeros(len(x), dtype=bool)
+        for s in self.surfaces:
+            out |= _near_support(s.primitive, x, s.support, radius)
+        return out
+
+
+class _Enclosure(_View):
+    """Several fitted enclosures (bores whose inside is free) as the one free space they bound
+    together: a point's clearance is the largest of its clearances inside each — at a junction
+    the arm stands in one bore and reaches into the other, and a link resting on the lip
+    between them touches the union's boundary, not either infinite cylinder."""
+
+    def __init__(self, surfaces: Sequence[MapSurface]) -> None:
+        self.surfaces = tuple(surfaces)
+        self.sigma = max(max(float(s.sigma) for s in surfaces), 1e-9)
+
+    def clearance(self, x: FloatArray) -> FloatArray:
+        return np.max([float(s.free_side) * np.asarray(s.primitive.signed_distance(x))  # type: ignore[attr-defined]
+                       for s in self.surfaces], axis=0)
+
+    def segment_clearance(self, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+        from wholearm_tools.geometry.base import segment_min_numeric
+
+        val, t = segment_min_numeric(self.clearance, a, b)
+        return np.asarray(val), np.asarray(t)
+
+
+def _views(surfaces: Sequence[MapSurface]) -> list[_View]:
+    """Each fitted surface on its own, except that two or more enclosures with free space inside
+    become one :class:`_Enclosure`."""
+    inside = [s for s in surfaces if float(s.free_side) < 0
+              and getattr(s.primitive, "kind", "") in _ENCLOSING]
+    if len(inside) < 2:
+        return [_View(s) for s in surfaces]
+    return [_Enclosure(inside), *(_View(s) for s in surfaces if s not in inside)]
