@@ -33,6 +33,7 @@ length around the best of 33 samples).  All clearances are 1-Lipschitz.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol, TypeVar, cast, runtime_checkable
@@ -190,14 +191,15 @@ def _radial_interval(rho: FloatArray, radius: float, free_side: float,
     return _interval(rho, radius, np.inf if thickness is None else radius + thickness)
 
 
-class _Numeric:
+class _Numeric(ABC):
     """Validation, squeezing and the numeric segment minimum around ``_clear``."""
 
     __slots__ = ()
     dim: ClassVar[int]
 
+    @abstractmethod
     def _clear(self, p: FloatArray) -> FloatArray:
-        raise NotImplementedError
+        """Clearance (distance on the free side, negative inside) of validated points."""
 
     def clearance(self, points: ArrayLike) -> FloatArray:
         """Clearance of ``points (N, dim)``, shape ``(N,)`` (``()`` for one point)."""

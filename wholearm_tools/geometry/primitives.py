@@ -16,6 +16,7 @@ cone, the core circle of a torus) a deterministic unit vector is returned so tha
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -61,11 +62,13 @@ class _Exact(Primitive):
 
     __slots__ = ()
 
+    @abstractmethod
     def _sd(self, p: FloatArray) -> FloatArray:
-        raise NotImplementedError
+        """Signed distance of validated points ``(N, dim)``."""
 
+    @abstractmethod
     def _sd_grad(self, p: FloatArray) -> tuple[FloatArray, FloatArray]:
-        raise NotImplementedError
+        """Signed distance and its gradient at validated points ``(N, dim)``."""
 
     def signed_distance(self, points: ArrayLike) -> FloatArray:
         """Signed Euclidean distance, ``points (N, dim) -> (N,)`` (``(dim,) -> ()``)."""

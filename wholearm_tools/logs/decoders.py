@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -86,7 +87,7 @@ class ValueList:
         return len(self.values)
 
 
-class TopicDecoder:
+class TopicDecoder(ABC):
     """Base class: ``add`` one chunk's messages of the channel, ``result`` at the end."""
 
     def __init__(self, channel: ChannelInfo, source: str) -> None:
@@ -96,12 +97,14 @@ class TopicDecoder:
     def error(self, what: str) -> LogFormatError:
         return LogFormatError(f"{self.source}: topic {self.channel.topic!r}: {what}")
 
+    @abstractmethod
     def add(self, buf: NDArray[np.uint8], starts: NDArray[np.int64], lengths: NDArray[np.int64],
             log_time: NDArray[np.int64]) -> None:
-        raise NotImplementedError
+        """Take one chunk's messages of the channel (payload ``starts``/``lengths`` in ``buf``)."""
 
+    @abstractmethod
     def result(self) -> Any:
-        raise NotImplementedError
+        """The decoded topic, once every chunk has been added."""
 
     def payloads(self, buf: NDArray[np.uint8], starts: NDArray[np.int64],
                  lengths: NDArray[np.int64]) -> list[bytes]:
