@@ -124,11 +124,20 @@ def robot_sweep(robot: RobotModel, q: NDArray[np.float64], *, step: float = 0.01
     if len(q) == 0:
         return Sweep(np.zeros((0, dim)), np.zeros((0, dim)), np.zeros(0))
     keep = [0]
-    last = q[0]
-    for i in range(1, len(q)):
-        if np.max(np.abs(q[i] - last)) > step:
-            keep.append(i)
-            last = q[i]
+    i, n, window = 0, len(q), 256
+    while True:
+        # the first later sample that moved more than `step` from the last kept one
+        lo = i + 1
+        while lo < n:
+            hi = min(lo + window, n)
+            far = np.flatnonzero(np.max(np.abs(q[lo:hi] - q[i]), axis=1) > step)
+            if far.size:
+                break
+            lo = hi
+        if lo >= n:
+            break
+        i = lo + int(far[0])
+        keep.append(i)
     pts = robot.joint_positions(q[keep])[..., :dim]           # (P, n+1, d)
     a = pts[:, :-1].reshape(-1, dim)
     b = pts[:, 1:].reshape(-1, dim)
@@ -394,15 +403,12 @@ def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
     """The table with ``p_tip_map`` / ``label_map``: eq. (2) refined by the fitted surfaces
     (:func:`wholearm_tools.classify.refine.refine_with_map`), labelled with the classifier's
     thresholds."""
-    from wholearm_tools.classify.tip import ClassifyParams
+    from wholearm_tools.classify.tip import labels_from_p_tip
 
     p_map = refine_with_map(table.p_tip, table.tip_center, table.tip_radius, table.seg_a,
                             table.seg_b, table.link_radius, surfaces,
                             support_radius=max(0.1, 5.0 * B))
-    prm = ClassifyParams()
-    label = np.where(p_map >= prm.tip_threshold, "tip",
-                     np.where(p_map <= prm.link_threshold, "link", "ambiguous"))
-    return table.with_map_classification(p_map, label)
+    return table.with_map_classification(p_map, labels_from_p_tip(p_map))
 
 
 #: identifiability noise (fraction of the scene size) a *reported* primitive must be determined

@@ -111,11 +111,13 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
         # ... or the whole side lies flush (a link along a wall: both ends equally close)
         ends = view.clearance(np.vstack([a, b]))
         side |= np.abs(ends[:m] - ends[m:]) <= sig
-        near_t = view.near(P, support_radius)
-        near_l = view.near(x_link, support_radius)
+        d_t = view.support_distance(P)
+        d_l = view.support_distance(x_link)
+        near_t = d_t <= support_radius
+        near_l = d_l <= support_radius
         # the other part of the link may not cut into the surface (right where it is known)
-        ok_t &= (clear_link > -penetration * sig) | ~view.near(x_link, cut_radius)
-        ok_l &= (clear_tip > -penetration * sig) | ~view.near(P, cut_radius)
+        ok_t &= (clear_link > -penetration * sig) | (d_l > cut_radius)
+        ok_l &= (clear_tip > -penetration * sig) | (d_t > cut_radius)
         gauss = 1.0 / (np.sqrt(2 * np.pi) * sig)
         like_t = np.maximum(like_t, np.where(near_t, gauss * np.exp(-0.5 * (clear_tip / sig)
                                                                     ** 2), 0.0))
@@ -132,16 +134,15 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
     return np.clip(np.where(same, p, out), 0.0, 1.0)
 
 
-def _near_support(prim: object, x: FloatArray, support: FloatArray, radius: float
-                  ) -> NDArray[np.bool_]:
-    """Whether the point of the surface closest to each ``x`` lies within ``radius`` of the
-    surface's support points."""
+def _support_distance(prim: object, x: FloatArray, support: FloatArray) -> FloatArray:
+    """Distance from the point of the surface closest to each ``x`` to the nearest of the
+    surface's ``support`` points (``inf`` without any)."""
     support = np.asarray(support, dtype=float)
     if support.size == 0:
-        return np.zeros(len(x), dtype=bool)
+        return np.full(len(x), np.inf)
     foot = np.asarray(prim.closest_point(x))                            # type: ignore[attr-defined]
     d2 = ((foot[:, None, :] - support[None, :, :]) ** 2).sum(-1)
-    return d2.min(axis=1) <= radius * radius
+    return np.sqrt(d2.min(axis=1))
 
 
 #: surface types that enclose the arm when their free side is inside
@@ -165,11 +166,11 @@ class _View:
             a, b, free_side=float(s.free_side))
         return np.asarray(val), np.asarray(t)
 
-    def near(self, x: FloatArray, radius: float) -> NDArray[np.bool_]:
-        out = np.zeros(len(x), dtype=bool)
-        for s in self.surfaces:
-            out |= _near_support(s.primitive, x, s.support, radius)
-        return out
+    def support_distance(self, x: FloatArray) -> FloatArray:
+        """Distance from the surface point closest to each ``x`` to the nearest point the
+        surface's own contacts cover (the smallest over an enclosure's members)."""
+        return np.min([_support_distance(s.primitive, x, s.support) for s in self.surfaces],
+                      axis=0)
 
 
 class _Enclosure(_View):

@@ -140,6 +140,16 @@ class Classification:
         return 1.0 / self.variance
 
 
+def labels_from_p_tip(p_tip: FloatArray, params: ClassifyParams | None = None
+                      ) -> NDArray[np.str_]:
+    """``tip`` where ``p_tip >= tip_threshold``, ``link`` where ``<= link_threshold``, else
+    ``ambiguous`` (the band of :class:`ClassifyParams`)."""
+    prm = params or ClassifyParams()
+    p = np.asarray(p_tip, dtype=float)
+    return np.where(p >= prm.tip_threshold, "tip",
+                    np.where(p <= prm.link_threshold, "link", "ambiguous"))
+
+
 # --------------------------------------------------------------------------- quadrature
 def _fibonacci_sphere(n: int) -> FloatArray:
     k = np.arange(n) + 0.5
@@ -164,6 +174,7 @@ class _Boundary:
     x: FloatArray        # (M, Q, d) points
     flux: FloatArray     # (M, Q) w (n·v)+ (0 where not exposed)
     tip: NDArray[np.bool_]  # (Q,) point on the outer sphere
+    normal: FloatArray   # (M, Q, 3) outward unit normal of the dilated robot at each point
 
 
 def _segment_dist(x: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -248,7 +259,7 @@ def _boundary(robot: RobotModel, q: FloatArray, qd: FloatArray, link: NDArray[np
     mask = (np.arange(n)[None] <= link[:, None]) * qd                 # (M, n)
     v = np.einsum("mqjk,mj->mqk", np.cross(axes[:, None], lever), mask)
     flux = w * np.maximum(np.sum(nrm * v, -1), 0.0) * exposed
-    return _Boundary(x[..., :dim], flux, tip)
+    return _Boundary(x[..., :dim], flux, tip, nrm)
 
 
 # --------------------------------------------------------------------------- eq. (1)
@@ -416,7 +427,7 @@ class TipEvaluator:
         if rows.size == 0:
             return
         ok = torque_consistent(
-            self.robot, np.asarray(contacts.q)[rows], bd.x[rows], bd.tip,
+            self.robot, np.asarray(contacts.q)[rows], bd.x[rows], bd.normal[rows],
             np.asarray(contacts.qd_before)[rows] != 0, held[rows],
             np.asarray(contacts.tau_peak)[rows], np.asarray(contacts.torque_threshold),
             np.asarray(contacts.link)[rows], self.B, np.radians(self.params.torque_angle))
@@ -449,8 +460,7 @@ class TipEvaluator:
         c = self.contacts
         M = len(c)
         prm = self.params
-        label = np.where(p >= prm.tip_threshold, "tip",
-                         np.where(p <= prm.link_threshold, "link", "ambiguous"))
+        label = labels_from_p_tip(p, prm)
         pts = self.robot.joint_positions(np.asarray(c.q)) if M else np.zeros((0, 2, 3))
         ar = np.arange(M)
         L = (np.linalg.norm(pts[ar, c.link + 1] - pts[ar, c.link], axis=-1) if M

@@ -160,24 +160,16 @@ class Contacts:
     def __post_init__(self) -> None:
         n = np.asarray(self.velocity_threshold).shape[0]
         m = np.asarray(self.t).reshape(-1).shape[0]
-        if self.tau_peak is None:
-            object.__setattr__(self, "tau_peak", np.zeros((m, n)))
-        if self.held is None:
-            object.__setattr__(self, "held", np.zeros((m, n), dtype=bool))
-        held = _frozen(self.held, bool)
-        if held.size == 0:
-            held = _frozen(np.zeros((m, n), dtype=bool))
-        if held.shape != (m, n):
-            raise InputError(f"expected held of shape ({m}, {n}), got {held.shape}")
-        object.__setattr__(self, "held", held)
         object.__setattr__(self, "t", _frozen(self.t).reshape(m))
         object.__setattr__(self, "link", _frozen(self.link, np.int64).reshape(m))
         object.__setattr__(self, "index", _frozen(self.index, np.int64).reshape(m))
         object.__setattr__(self, "t_end", _frozen(self.t_end).reshape(m))
-        for name in ("q", "qd_before", "tau_peak"):
-            arr = _frozen(getattr(self, name))
+        for name, dtype in (("q", float), ("qd_before", float), ("tau_peak", float),
+                            ("held", bool)):
+            value = getattr(self, name)
+            arr = _frozen(np.zeros((m, n)) if value is None else value, dtype)
             if arr.size == 0:
-                arr = _frozen(np.zeros((m, n)))
+                arr = _frozen(np.zeros((m, n)), dtype)
             if arr.shape != (m, n):
                 raise InputError(f"expected {name} of shape ({m}, {n}), got {arr.shape}")
             object.__setattr__(self, name, arr)
@@ -385,13 +377,11 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     part only) at the contact pose, with ``P_C`` from the whole run's swept map — space the arm
     swept at any time (before or after) cannot hold the surface that stopped it.
 
-    Only boundary points consistent with the joint torques count.  A frictionless contact at
-    robot point ``r`` pushes along the boundary normal ``-nu``; its moment about joint ``i`` is
-    ``f g_i``, ``g_i = (a_i x (r - o_i)) . (-nu)``, with ``f`` balancing the torques ``tau`` of
-    the joints that were moving (least squares).  Joints ``lo+1..hi`` were held and carry no
-    load, so a point of link ``k > lo`` counts only where the predicted held torques
-    ``|f g_i|``, ``lo < i <= k``, stay below the load thresholds ``tau_th`` (the force passes
-    (nearly) through those axes — a roll joint along its link, a push along the link).
+    Only boundary points consistent with the joint torques count
+    (:func:`torque_consistent`): joints ``lo+1..hi`` were held and carry no load, so a point of
+    link ``k > lo`` counts only where the force predicted there leaves them (nearly) unloaded —
+    it passes through those axes (a roll joint along its link, a push along the link) — and
+    predicts the loads the other held joints show.
 
     ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
     the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of
@@ -406,7 +396,7 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
     bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
     tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
-    consistent = torque_consistent(robot, q[rows], bd.x, bd.tip, qd[rows] != 0, held[rows],
+    consistent = torque_consistent(robot, q[rows], bd.x, bd.normal, qd[rows] != 0, held[rows],
                                    tau[rows], tau_tol, cand, B, np.radians(force_angle))
     mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
     out = []
@@ -416,7 +406,7 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     return out
 
 
-def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, on_end: Any,
+def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
                       moving: NDArray[np.bool_], held: NDArray[np.bool_], tau: FloatArray,
                       tau_tol: FloatArray, cand: IntArray, B: float, angle: float,
                       ) -> NDArray[np.bool_]:
@@ -435,7 +425,7 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, on_end
     ----------
     q, moving, held, tau : (R, n) configuration, joints driven into the stop, held joints,
         torques at the height of the stop
-    x_bd : (R, Q, d) boundary points; on_end : (Q,) bool, point on the link's outer sphere
+    x_bd : (R, Q, d) boundary points; nu : (R, Q, 3) their outward unit normals
     tau_tol : (n,) torque tolerance; cand : (R,) candidate link; B : dilation [m]
     angle : float [rad]
 
@@ -449,17 +439,6 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, on_end
     axes = robot.joint_axes(q)                        # (R, n, 3)
     x = np.zeros((R, Qn, 3))
     x[..., : robot.dim] = x_bd
-    # boundary normal: from the nearest point of the candidate's capsule out to x
-    ar = np.arange(R)
-    a, b = pts[ar, cand], pts[ar, cand + 1]
-    ab = b - a
-    u = np.clip(np.einsum("rqk,rk->rq", x - a[:, None], ab)
-                / np.maximum(np.einsum("rk,rk->r", ab, ab), 1e-300)[:, None], 0, 1)
-    on_axis = a[:, None] + u[..., None] * ab[:, None]
-    tip = np.asarray(on_end)[None, :, None]
-    centre = np.where(tip, b[:, None], on_axis)
-    nu = x - centre
-    nu /= np.maximum(np.linalg.norm(nu, axis=-1, keepdims=True), 1e-12)
     r_pt = x - B * nu                                 # the robot's own surface point
     lever = np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :n, :])  # (R, Q, n, 3)
     g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
@@ -592,7 +571,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         prev = cur
     inner: dict[int, int] = {}  # start sample -> innermost link of its rigid group
     if params.rigid_outer:
-        ext = _extend_rigid(rows, stopped, loaded, max(2, round(params.before_time / dt)))
+        ext = _extend_rigid(rows, stopped, loaded, nb)
         inner = {r[0]: r[2] for r in rows}
         rows = ext
     gap = max(2, round(params.smooth_time / dt)) + 1
