@@ -83,8 +83,38 @@ def test_sweep_violation_counts_cuts_next_to_the_support_only():
     cuts = ([-0.1, 0.05, -0.03], [0.1, 0.05, 0.03], 0.01)  # through it, next to the support
     far = ([5.0, 0.0, -0.1], [5.0, 0.0, 0.1], 0.01)        # through it, 5 m away
     sweep = Sweep(*[np.array(v, dtype=float) for v in zip(above, cuts, far, strict=True)])
-    bad, checked = sweep_violation(floor, 1.0, support, sweep, near=0.05, tol=1e-3)
-    assert (bad, checked) == (1, 2)
+    check = sweep_violation(floor, 1.0, support, sweep, near=0.05, tol=1e-3)
+    assert (check.cuts, check.checked) == (1, 2)
+    # its deepest point is at x = -0.1, y = 0.05: within 5 cm of two support points, at the
+    # edge of the support (none at x < -0.1)
+    assert check.contradicted == pytest.approx(2 / 9)
+    assert check.interior == 0
+
+
+def test_cuts_past_the_edge_of_the_support_do_not_rule_a_surface_out():
+    """A bore wall with a window: the arm reaches through the window right past the last
+    contacts, many times.  Cuts next to 1 of 80 contacts and outside the region they cover
+    leave the surface admissible; the same cuts between the contacts rule it out."""
+    from wholearm_tools.fit.core import sweep_violation
+    from wholearm_tools.fit.data import Sweep
+    from wholearm_tools.geometry import Plane
+
+    wall = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    support = np.array([[x, y, 0.0] for x in np.linspace(-0.3, 0.0, 16)
+                        for y in (-0.04, -0.02, 0.0, 0.02, 0.04)])          # 2 cm apart
+    n = 40
+    through_window = Sweep(np.tile([0.012, 0.0, -0.05], (n, 1)), np.tile([0.012, 0.0, 0.05],
+                                                                         (n, 1)), np.full(n, 0.005))
+    clear = Sweep(np.tile([-0.15, 0.0, 0.02], (1000, 1)), np.tile([-0.1, 0.0, 0.03], (1000, 1)),
+                  np.full(1000, 0.005))
+    edge = Sweep(np.vstack([through_window.a, clear.a]), np.vstack([through_window.b, clear.b]),
+                 np.concatenate([through_window.radius, clear.radius]))
+    check = sweep_violation(wall, 1.0, support, edge, near=0.015, tol=1e-3)
+    assert check.cuts == n and check.contradicted == pytest.approx(1 / 80)
+    assert check.interior == 0 and not check.rules_out()
+    inside = Sweep(edge.a - [0.15, 0.0, 0.0], edge.b - [0.15, 0.0, 0.0], edge.radius)
+    check = sweep_violation(wall, 1.0, support, inside, near=0.015, tol=1e-3)
+    assert check.interior > 0 and check.rules_out()
 
 
 def test_a_circle_the_robot_swept_through_is_not_a_primitive():

@@ -553,30 +553,82 @@ def free_space_violation(kind: str, params: dict[str, Any], free_side: float, da
     return float(np.mean(sd < 0.0))
 
 
+@dataclass(frozen=True, slots=True)
+class SweepCheck:
+    """Where the robot's sweep cuts into a fitted surface next to its contacts
+    (:func:`sweep_violation`).
+
+    ``cuts``: capsules that penetrate next to the support, of ``checked`` capsules near it;
+    ``contradicted``: fraction of the support points with a cut within ``near`` of them;
+    ``interior``: cuts whose foot the support surrounds (support points on every side of it
+    within ``3 near``, in the surface's tangent space).
+    """
+
+    cuts: int
+    checked: int
+    contradicted: float
+    interior: int
+
+    def rules_out(self) -> bool:
+        """Whether the cuts rule the surface out: many capsules cut it (more than twice and
+        in more than 1 % of those checked), next to a good share (15 %) of its contacts or
+        inside the region they surround.  A true surface is cut only past the edge of its
+        support — through a junction's window, beyond a wall's corner — next to the few
+        contacts on that edge; a surface that is not there is cut between its contacts."""
+        if self.cuts <= max(2, 0.01 * self.checked):
+            return False
+        return self.contradicted > 0.15 or self.interior > max(2, 0.002 * self.checked)
+
+
+def _surrounded(primitive: Any, x: np.ndarray, foot: np.ndarray, support: np.ndarray,
+                radius: float) -> np.ndarray:
+    """Per foot point: whether the support points within ``radius`` of it lie on every side
+    of it in the surface's tangent space (1-D for a curve, 2-D for a surface)."""
+    g = np.asarray(primitive.gradient(x))                                # (k, d) unit normals
+    dv = support[None, :, :] - foot[:, None, :]                          # (k, S, d)
+    near = np.sum(dv * dv, axis=2) <= radius * radius
+    dv = dv - np.sum(dv * g[:, None, :], axis=2)[..., None] * g[:, None, :]
+    if foot.shape[1] == 2:
+        c = dv[..., 0] * -g[:, None, 1] + dv[..., 1] * g[:, None, 0]    # along the tangent
+        return np.any(near & (c > 1e-9), axis=1) & np.any(near & (c < -1e-9), axis=1)
+    e1 = np.cross(g, np.where(np.abs(g[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(g, e1)
+    ang = np.arctan2(np.sum(dv * e2[:, None], axis=2), np.sum(dv * e1[:, None], axis=2))
+    ok = near & (np.linalg.norm(dv, axis=2) > 1e-9)
+    first = np.where(ok.any(axis=1), ang[np.arange(len(ang)), np.argmax(ok, axis=1)], 0.0)
+    ang = np.sort(np.where(ok, ang, first[:, None]), axis=1)
+    gaps = np.diff(np.concatenate([ang, ang[:, :1] + 2 * np.pi], axis=1), axis=1)
+    return gaps.max(axis=1) < np.pi
+
+
 def sweep_violation(primitive: Any, free_side: float, support: np.ndarray, sweep: Sweep,
-                    *, near: float, tol: float) -> tuple[int, int]:
-    """How often the robot's sweep cuts into a fitted surface next to its own contacts.
+                    *, near: float, tol: float) -> SweepCheck:
+    """How the robot's sweep cuts into a fitted surface next to its own contacts.
 
     A capsule of the sweep *penetrates* the primitive when its clearance
     ``free_side * sd - radius`` falls below ``-tol``; it counts when the point of the surface
-    closest to its deepest point lies within ``near`` of a support point (the surface is
-    known there; far away the primitive's infinite extension may well cross the robot's
-    path — over the top of a post, into the branch of a junction).
-
-    Returns ``(violations, capsules checked)``.
+    closest to its deepest point (its foot) lies within ``near`` of a support point (the
+    surface is known there; far away the primitive's infinite extension may well cross the
+    robot's path — over the top of a post, into the branch of a junction).  See
+    :class:`SweepCheck` for the figures and the rule that rules a surface out.
     """
     idx = sweep.near(support, near)
     if idx.size == 0:
-        return 0, 0
+        return SweepCheck(0, 0, 0.0, 0)
     a, b, r = sweep.a[idx], sweep.b[idx], sweep.radius[idx]
     clear, t = primitive.segment_signed_distance(a, b, free_side=float(free_side))
     deep = np.flatnonzero(np.asarray(clear) - r < -tol)
     if deep.size == 0:
-        return 0, int(idx.size)
+        return SweepCheck(0, int(idx.size), 0.0, 0)
     x = a[deep] + np.asarray(t)[deep, None] * (b[deep] - a[deep])
     foot = np.asarray(primitive.closest_point(x))
-    d2 = np.min(np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2), axis=1)
-    return int(np.count_nonzero(d2 <= near * near)), int(idx.size)
+    d2 = np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2)   # (k, S)
+    hit = np.any(d2 <= near * near, axis=1)
+    contradicted = float(np.mean(np.any(d2[hit] <= near * near, axis=0))) if hit.any() else 0.0
+    interior = int(np.count_nonzero(_surrounded(primitive, x[hit], foot[hit], support,
+                                                3.0 * near))) if hit.any() else 0
+    return SweepCheck(int(np.count_nonzero(hit)), int(idx.size), contradicted, interior)
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:

@@ -277,8 +277,10 @@ def segment(
     sweep : Sweep or None
         The robot's capsules over the run.  A primitive that the sweep cuts into (deeper than
         ``max(5 sigma, 2 mm)``) within ``sweep_near`` metres of its own contacts, more than
-        twice and in more than 1 % of the capsules checked, is not admissible: the robot was
-        there, so no surface is (see :func:`~wholearm_tools.fit.core.sweep_violation`).
+        twice and in more than 1 % of the capsules checked, next to more than 15 % of those
+        contacts or between them, is not admissible: the robot was there, so no surface is
+        (see :class:`~wholearm_tools.fit.core.SweepCheck`; a true surface is cut only past the
+        edge of its support, through a junction's window).
     sweep_near : float
         See ``sweep``.
     base : (d,) point or None
@@ -439,9 +441,9 @@ def segment(
             _, t = prim.segment_signed_distance(sub.link_a, sub.link_b, free_side=fit.free_side)
             pts.append(sub.link_a + np.asarray(t)[:, None] * (sub.link_b - sub.link_a))
         support = np.asarray(prim.closest_point(np.vstack(pts)))
-        bad, checked = sweep_violation(prim, fit.free_side, support, sweep,
-                                       near=sweep_near, tol=max(5.0 * sigma, 2e-3))
-        return bad <= max(2, 0.01 * checked)
+        check = sweep_violation(prim, fit.free_side, support, sweep, near=sweep_near,
+                                tol=max(5.0 * sigma, 2e-3))
+        return not check.rules_out()
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
         return residuals(kind, fit.params, data, fit.free_side) / sigma
