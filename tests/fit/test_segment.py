@@ -110,11 +110,14 @@ def test_cuts_past_the_edge_of_the_support_do_not_rule_a_surface_out():
     edge = Sweep(np.vstack([through_window.a, clear.a]), np.vstack([through_window.b, clear.b]),
                  np.concatenate([through_window.radius, clear.radius]))
     check = sweep_violation(wall, 1.0, support, edge, near=0.015, tol=1e-3)
-    assert check.cuts == n and check.contradicted == pytest.approx(1 / 80)
-    assert check.interior == 0 and not check.rules_out()
+    assert check.cuts == n
+    assert check.contradicted == pytest.approx(1 / 80)
+    assert check.interior == 0
+    assert not check.rules_out()
     inside = Sweep(edge.a - [0.15, 0.0, 0.0], edge.b - [0.15, 0.0, 0.0], edge.radius)
     check = sweep_violation(wall, 1.0, support, inside, near=0.015, tol=1e-3)
-    assert check.interior > 0 and check.rules_out()
+    assert check.interior > 0
+    assert check.rules_out()
 
 
 def test_a_circle_the_robot_swept_through_is_not_a_primitive():
