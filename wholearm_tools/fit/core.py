@@ -130,6 +130,10 @@ def _symbols(kind: str, nt: int, nl: int) -> dict[str, Any]:
             "eq": m.eq(ths), "ineq": m.ineq(ths), "delta": delta}
 
 
+#: iterations a start cut off by a short ``max_iter`` may take to finish (see fit_primitive)
+_FINISH_ITER = 200
+
+
 @functools.lru_cache(maxsize=128)
 def _problem(kind: str, loss: str, nt: int, nl: int, max_iter: int) -> Any:
     """Build (once) the IPOPT solver for a problem shape and loss."""
@@ -770,8 +774,7 @@ def fit_primitive(
         cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
         cands = [c for c in cands if np.all(np.isfinite(c))]
         scored = sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0))
-        for th0 in scored[: max(1, m.starts)]:
-            sol = _solve(m, nd, th0, side, "linear", 1.0, max_iter)
+        def consider(sol: _Solve, side: float = side) -> None:
             delta = loss_scale * (noise / nd.scale if noise else 1.0)
             if loss != "linear" and sol.success:
                 if noise is None:
@@ -783,6 +786,19 @@ def fit_primitive(
             if best is None or (not sol.success, sol.cost) < (not best.success, best.cost):
                 fits[side] = sol
                 deltas[side] = delta
+
+        sols = [_solve(m, nd, th0, side, "linear", 1.0, max_iter)
+                for th0 in scored[: max(1, m.starts)]]
+        done = [s_.cost for s_ in sols if s_.success]
+        cut = sorted((i for i, s_ in enumerate(sols)
+                      if s_.status == "Maximum_Iterations_Exceeded"), key=lambda i: sols[i].cost)
+        if cut and max_iter < _FINISH_ITER and (not done or sols[cut[0]].cost < min(done)):
+            # a short iteration limit (seed fits) cut off the start that was heading below
+            # every converged one: a wrong basin converges fast, the right one may not
+            # (seven link contacts on a post): let it finish
+            sols[cut[0]] = _solve(m, nd, sols[cut[0]].th, side, "linear", 1.0, _FINISH_ITER)
+        for sol in sols:
+            consider(sol)
     if not fits:
         return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
     side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
