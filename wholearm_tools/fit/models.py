@@ -23,7 +23,7 @@ All geometry here is in *normalised* coordinates (data centroid at the origin, u
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -493,29 +493,8 @@ def _refine_axis(X: FloatArray, off: FloatArray, side: float, axis: FloatArray,
     return best
 
 
-def _cyl_follow_links(ctx: InitContext, th: FloatArray, rounds: int = 12) -> FloatArray:
-    """Refine a cylinder guess for link contacts by alternation: move each link's surface
-    sample to its point of least clearance under the guess, refine the axis locally on those
-    samples, refit the cross-section; until the samples stop moving.  The scan starts from
-    link midpoints, which a link tangent to a post near one end is far from: with mostly link
-    contacts that start leaves IPOPT in a wrong basin (r 0.038 for a 0.05 post)."""
-    lp_prev = None
-    for _ in range(rounds):
-        lp = refine_link_points(ctx, lambda p, th=th: _cyl_sd(NP_OPS, p.T, th), ctx.side)
-        if lp_prev is not None and float(np.max(np.abs(lp - lp_prev))) < 1e-4:
-            break
-        lp_prev = lp
-        on = replace(ctx, a=lp, b=lp)  # each link as its surface sample
-        axis = _refine_axis(on.surface_points, on.offsets, ctx.side, th[3:6])
-        th = _cyl_from_axis(on, axis)
-    return th
-
-
 def _cyl_init(ctx: InitContext) -> list[FloatArray]:
-    out = [_cyl_from_axis(ctx, a) for a in [*_scan_axes(ctx), *_axis_candidates(ctx)]]
-    if len(ctx.a) == 0:
-        return out
-    return [*(_cyl_follow_links(ctx, th) for th in out[:3]), *out]
+    return [_cyl_from_axis(ctx, a) for a in [*_scan_axes(ctx), *_axis_candidates(ctx)]]
 
 
 def _cyl_quick(ctx: InitContext) -> list[FloatArray]:
