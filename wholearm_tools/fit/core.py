@@ -274,6 +274,13 @@ def _residuals_norm(m: Model, th: np.ndarray, side: float, nd: _Norm
     return rt, val - nd.link_w, t, interior
 
 
+def _rms_norm(m: Model, sol: _Solve, side: float, nd: _Norm) -> float:
+    """Dof-corrected RMS residual of a solve (normalised units)."""
+    rt, rl, _, _ = _residuals_norm(m, sol.th, side, nd)
+    r = np.concatenate([rt, rl])
+    return float(np.sqrt(np.sum(r * r) / max(len(r) - m.dof, 1)))
+
+
 def _cost_norm(m: Model, th: np.ndarray, side: float, nd: _Norm, loss: str, delta: float
                ) -> float:
     rt, rl, _, _ = _residuals_norm(m, th, side, nd)
@@ -681,6 +688,7 @@ def fit_primitive(
     noise: float | None = None,
     initial: dict[str, Any] | None = None,
     max_iter: int = 200,
+    good_rms: float | None = None,
 ) -> FitResult:
     """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
 
@@ -710,6 +718,11 @@ def fit_primitive(
         cylinders, cones and tori).
     max_iter : int
         IPOPT iteration limit per solve.
+    good_rms : float or None
+        An RMS residual [m] (dof-corrected) the caller would accept.  With a short
+        ``max_iter``, when no converged start reaches it, the lowest-cost start the limit cut
+        off is let finish (up to 200 iterations): a wrong basin converges fast, the right one
+        may not (seven link contacts on a post).  None: starts are not finished.
 
     Returns
     -------
@@ -789,13 +802,11 @@ def fit_primitive(
 
         sols = [_solve(m, nd, th0, side, "linear", 1.0, max_iter)
                 for th0 in scored[: max(1, m.starts)]]
-        done = [s_.cost for s_ in sols if s_.success]
         cut = sorted((i for i, s_ in enumerate(sols)
                       if s_.status == "Maximum_Iterations_Exceeded"), key=lambda i: sols[i].cost)
-        if cut and max_iter < _FINISH_ITER and (not done or sols[cut[0]].cost < min(done)):
-            # a short iteration limit (seed fits) cut off the start that was heading below
-            # every converged one: a wrong basin converges fast, the right one may not
-            # (seven link contacts on a post): let it finish
+        if (cut and good_rms is not None and max_iter < _FINISH_ITER
+                and not any(s_.success and _rms_norm(m, s_, side, nd) * nd.scale <= good_rms
+                            for s_ in sols)):
             sols[cut[0]] = _solve(m, nd, sols[cut[0]].th, side, "linear", 1.0, _FINISH_ITER)
         for sol in sols:
             consider(sol)

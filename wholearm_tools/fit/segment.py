@@ -342,7 +342,10 @@ def segment(
                 members = nb[inl]
         if len(members) <= MODELS[kind].dof:
             return members, fit_primitive(kind, data.take(members[:0]))
-        f = fit_primitive(kind, data.take(members), max_iter=seed_max_iter)
+        # (the cheap types only: a cone or torus cut off at a seed rarely gets there)
+        good = (seed_accept * sigma_seed if math.isfinite(sigma_seed) and kind in cheap
+                else None)
+        f = fit_primitive(kind, data.take(members), max_iter=seed_max_iter, good_rms=good)
         while (trim_ok and len(members) > size and f
                and _rms_dof(f) > seed_accept * sigma_seed):
             r = np.abs(f.residuals)
