@@ -163,3 +163,19 @@ def test_drawing_errors(map_2d, map_3d, tmp_path):
 def test_planar_map_mesh_is_extruded_strips(map_2d):
     mesh = map_mesh(map_2d, height=0.3)
     assert np.allclose(np.abs(mesh.vertices[:, 2]), 0.15)
+
+
+def test_unexplained_contacts_too_few_to_mesh_are_reported_once(map_3d, caplog):
+    """The exports, the overlay and the report mesh the same map: the reason the unexplained
+    contacts could not be meshed is logged once, not once per output."""
+    import dataclasses
+    import logging
+
+    from wholearm_tools.mesh.export import map_meshes
+
+    few = dataclasses.replace(map_3d, unexplained=map_3d.unexplained[:2] + 1e-3)
+    with caplog.at_level(logging.WARNING):
+        names = [name for name, _ in map_meshes(few)]
+        map_mesh(few)
+    assert "unexplained" not in names
+    assert sum("not meshed" in r.getMessage() for r in caplog.records) == 1

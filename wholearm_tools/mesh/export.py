@@ -9,6 +9,7 @@ existing target untouched.
 from __future__ import annotations
 
 import base64
+import functools
 import json
 import logging
 import os
@@ -75,12 +76,21 @@ def map_meshes(surface_map: SurfaceMap, resolution: float = DEFAULT_RESOLUTION,
     named = [(f"primitive/{p.id}", primitive_mesh(p, resolution, height))
              for p in surface_map.primitives]
     if include_unexplained and not surface_map.planar and len(surface_map.unexplained):
-        surface = unexplained_mesh(surface_map.unexplained)
+        pts = np.ascontiguousarray(surface_map.unexplained, dtype=float)
+        surface = _unexplained_surface(pts.tobytes(), pts.shape)
         if surface:
             named.append(("unexplained", surface.mesh))
-        else:
-            log.warning("unexplained contacts not meshed: %s", surface.reason)
     return named
+
+
+@functools.lru_cache(maxsize=8)
+def _unexplained_surface(data: bytes, shape: tuple[int, ...]) -> Any:
+    """:func:`unexplained_mesh` of the points, computed (and a failure logged) once per point
+    set: the exports, the overlay and the report all mesh the same map."""
+    surface = unexplained_mesh(np.frombuffer(data, dtype=float).reshape(shape))
+    if not surface:
+        log.warning("unexplained contacts not meshed: %s", surface.reason)
+    return surface
 
 
 def map_mesh(surface_map: SurfaceMap, resolution: float = DEFAULT_RESOLUTION,
