@@ -487,6 +487,8 @@ def _table_figure(plt: Any, table: ComparisonTable) -> Any:
 
 
 def _plots_figure(plt: Any, table: ComparisonTable) -> Any:
+    from matplotlib.ticker import MaxNLocator
+
     fig, axes = plt.subplots(2, 2, figsize=(11.69, 8.27), constrained_layout=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = {"tip": ("o", "-"), "link": ("s", "--"), "ambiguous": ("^", ":")}
@@ -531,6 +533,8 @@ def _plots_figure(plt: Any, table: ComparisonTable) -> Any:
         ax.set_xticks(table.Bs, [f"{b:g}" for b in table.Bs])
         ax.minorticks_off()
         ax.grid(True, alpha=0.3)
+        if ylabel in ("contacts", "count"):  # whole numbers: no 1.2 primitives on the axis
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
         if ax.lines:
             ax.legend(fontsize=6)
         else:
