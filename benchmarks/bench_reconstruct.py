@@ -178,7 +178,8 @@ def main() -> None:
     if wj:
         worst = max(r[5] for r in wj)
         print(f"\nwell_junction reconstruct: worst {worst:.1f} s wall for "
-              f"{wj[0][3]:.0f} s of arm time (target < 30 s)")
+              f"{wj[0][3]:.0f} s of arm time (target: < 30 s for 60 s of arm time, "
+              "measured by bench_junction.py --duration 60)")
     notes = {m for r in rows for m in r[10]}
     if notes:
         print("\nmessages: " + "; ".join(sorted(notes)))
