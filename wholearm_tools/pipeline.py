@@ -559,7 +559,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
             sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None,
-            base=run.robot.joint_positions(np.zeros(run.robot.dof))[0, : run.robot.dim])
+            base=run.robot.base)
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

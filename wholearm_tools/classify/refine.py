@@ -150,15 +150,17 @@ _ENCLOSING = ("circle", "sphere", "cylinder", "cone", "torus")
 
 
 class _View:
-    """One fitted surface as the refinement queries it (clearances on its free side)."""
+    """Fitted surfaces as the refinement queries them: one surface, or (:class:`_Enclosure`)
+    several bounding one free space; a point's clearance is the largest of its clearances on
+    each one's free side."""
 
-    def __init__(self, surf: MapSurface) -> None:
-        self.surfaces = (surf,)
-        self.sigma = max(float(surf.sigma), 1e-9)
+    def __init__(self, *surfaces: MapSurface) -> None:
+        self.surfaces = tuple(surfaces)
+        self.sigma = max(max(float(s.sigma) for s in surfaces), 1e-9)
 
     def clearance(self, x: FloatArray) -> FloatArray:
-        s = self.surfaces[0]
-        return float(s.free_side) * np.asarray(s.primitive.signed_distance(x))  # type: ignore[attr-defined]
+        return np.max([float(s.free_side) * np.asarray(s.primitive.signed_distance(x))  # type: ignore[attr-defined]
+                       for s in self.surfaces], axis=0)
 
     def segment_clearance(self, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
         s = self.surfaces[0]
@@ -175,17 +177,9 @@ class _View:
 
 class _Enclosure(_View):
     """Several fitted enclosures (bores whose inside is free) as the one free space they bound
-    together: a point's clearance is the largest of its clearances inside each — at a junction
-    the arm stands in one bore and reaches into the other, and a link resting on the lip
-    between them touches the union's boundary, not either infinite cylinder."""
-
-    def __init__(self, surfaces: Sequence[MapSurface]) -> None:
-        self.surfaces = tuple(surfaces)
-        self.sigma = max(max(float(s.sigma) for s in surfaces), 1e-9)
-
-    def clearance(self, x: FloatArray) -> FloatArray:
-        return np.max([float(s.free_side) * np.asarray(s.primitive.signed_distance(x))  # type: ignore[attr-defined]
-                       for s in self.surfaces], axis=0)
+    together — at a junction the arm stands in one bore and reaches into the other, and a link
+    resting on the lip between them touches the union's boundary, not either infinite
+    cylinder.  The union has no closed-form segment distance: it is minimised numerically."""
 
     def segment_clearance(self, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
         from wholearm_tools.geometry.base import segment_min_numeric
@@ -201,4 +195,4 @@ def _views(surfaces: Sequence[MapSurface]) -> list[_View]:
               and getattr(s.primitive, "kind", "") in _ENCLOSING]
     if len(inside) < 2:
         return [_View(s) for s in surfaces]
-    return [_Enclosure(inside), *(_View(s) for s in surfaces if s not in inside)]
+    return [_Enclosure(*inside), *(_View(s) for s in surfaces if s not in inside)]

@@ -442,15 +442,15 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     r_pt = x - B * nu                                 # the robot's own surface point
     lever = np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :n, :])  # (R, Q, n, 3)
     g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
-    joints = np.arange(n)[None, None, :]
-    g = np.where(joints <= cand[:, None, None], g, 0.0)
+    on_chain = np.arange(n)[None, None, :] <= cand[:, None, None]   # joints that move the link
+    g = np.where(on_chain, g, 0.0)
     mv = moving[:, None, :]
     gb = np.where(mv, g, 0.0)
     f = np.maximum(-np.einsum("rqj,rj->rq", gb, np.where(moving, tau, 0.0))
                    / np.maximum(np.einsum("rqj,rqj->rq", gb, gb), 1e-300), 0.0)
     pred = -f[..., None] * g                          # (R, Q, n)
     slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
-    slack = np.where(joints <= cand[:, None, None], slack, 0.0)
+    slack = np.where(on_chain, slack, 0.0)
     ok = np.abs(pred - tau[:, None, :]) <= tau_tol[None, None, :] + slack
     return np.all(~held[:, None, :] | ok, axis=-1)
 

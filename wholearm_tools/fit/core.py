@@ -48,6 +48,7 @@ from wholearm_tools.fit.models import (
     MODELS,
     InitContext,
     Model,
+    perp_bases,
     segment_min,
     signed_distance_np,
 )
@@ -602,9 +603,7 @@ def _surrounded(primitive: Any, x: np.ndarray, foot: np.ndarray, support: np.nda
     if foot.shape[1] == 2:
         c = dv[..., 0] * -g[:, None, 1] + dv[..., 1] * g[:, None, 0]    # along the tangent
         return np.any(near & (c > 1e-9), axis=1) & np.any(near & (c < -1e-9), axis=1)
-    e1 = np.cross(g, np.where(np.abs(g[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(g, e1)
+    e1, e2 = perp_bases(g)
     ang = np.arctan2(np.sum(dv * e2[:, None], axis=2), np.sum(dv * e1[:, None], axis=2))
     ok = near & (np.linalg.norm(dv, axis=2) > 1e-9)
     first = np.where(ok.any(axis=1), ang[np.arange(len(ang)), np.argmax(ok, axis=1)], 0.0)
@@ -634,12 +633,12 @@ def sweep_violation(primitive: Any, free_side: float, support: np.ndarray, sweep
         return SweepCheck(0, int(idx.size), 0.0, 0)
     x = a[deep] + np.asarray(t)[deep, None] * (b[deep] - a[deep])
     foot = np.asarray(primitive.closest_point(x))
-    d2 = np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2)   # (k, S)
-    hit = np.any(d2 <= near * near, axis=1)
-    contradicted = float(np.mean(np.any(d2[hit] <= near * near, axis=0))) if hit.any() else 0.0
+    close = np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2) <= near * near
+    hit = close.any(axis=1)                                              # (k,) cuts that count
     interior = int(np.count_nonzero(_surrounded(primitive, x[hit], foot[hit], support,
                                                 3.0 * near))) if hit.any() else 0
-    return SweepCheck(int(np.count_nonzero(hit)), int(idx.size), contradicted, interior)
+    return SweepCheck(int(np.count_nonzero(hit)), int(idx.size),
+                      float(np.mean(close.any(axis=0))), interior)
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:

@@ -164,9 +164,9 @@ def local_normals(points: FloatArray, k: int = 8) -> FloatArray:
 
 
 def _perp_basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:
-    e = np.eye(3)[int(np.argmin(np.abs(axis)))]
-    u = _unit(np.cross(axis, e))
-    return u, np.cross(axis, u)
+    """:func:`perp_bases` of one axis."""
+    u, v = perp_bases(np.asarray(axis, dtype=float)[None])
+    return u[0], v[0]
 
 
 def refine_link_points(ctx: InitContext, sd_np: Callable[[FloatArray], FloatArray],
@@ -436,7 +436,7 @@ def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0,
     return [_refine_axis(X, off, ctx.side, a) for a in out]
 
 
-def _perp_bases(A: FloatArray) -> tuple[FloatArray, FloatArray]:
+def perp_bases(A: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Per unit row ``a`` of ``A (K, 3)``: unit ``u, v`` with ``(a, u, v)`` right-handed
     orthonormal, ``u = a x e`` for the axis ``e`` least aligned with ``a`` (cross products
     written out: ``np.cross`` costs more than the arithmetic on these small arrays)."""
@@ -456,7 +456,7 @@ def _axis_score(X: FloatArray, off: FloatArray, side: float, A: FloatArray) -> F
     """Geometric residual sum of squares of the offset circle fit, with the contact radii as
     offsets (``rho_i = r + side * w_i``), for each axis row of ``A``: the Kasa fit
     ``[2x 2y 1] [cx cy c]^T = x^2 + y^2`` of ``X`` projected on the plane normal to it."""
-    U, V = _perp_bases(A)
+    U, V = perp_bases(A)
     x = X @ U.T
     y = X @ V.T
     M = np.stack([2 * x, 2 * y, np.ones_like(x)], axis=2)
@@ -559,7 +559,7 @@ def _cone_fits(X: FloatArray, A: FloatArray) -> tuple[FloatArray, ...]:
     per direction with ``score`` the sum of squared geometric (meridian) residuals, ``inf``
     where the fit is not a cone opening along ``+a`` (``k <= 0``).
     """
-    U, V = _perp_bases(A)
+    U, V = perp_bases(A)
     x, y, h = X @ U.T, X @ V.T, X @ A.T  # (N, K)
     M = np.stack([2 * x, 2 * y, h * h, h, np.ones_like(x)], axis=2)  # (N, K, 5)
     MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(5)

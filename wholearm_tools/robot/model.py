@@ -261,6 +261,11 @@ class RobotModel:
         return float(max(self.link_radii[link], self.link_radii[link + 1]))
 
     @property
+    def base(self) -> FloatArray:
+        """The first joint's origin, ``(dim,)``: the base point every configuration shares."""
+        return self.joint_positions(np.zeros(self.dof))[0, : self.dim]
+
+    @property
     def reach(self) -> float:
         """Upper bound on the distance from the base to any point of the robot."""
         lengths = np.linalg.norm(self.origins[1:, :3, 3], axis=1).sum() + np.linalg.norm(

@@ -27,7 +27,7 @@ class SweptGrid:
         self.dim = robot.dim
         reach = robot.reach
         self.cell = float(cell) if cell else reach / 25.0
-        base = robot.joint_positions(np.zeros(robot.dof))[0, : self.dim]
+        base = robot.base
         self.origin = base - reach
         self.shape = tuple([int(np.ceil(2 * reach / self.cell)) + 1] * self.dim)
         self.swept = np.zeros(self.shape, dtype=bool)

@@ -282,7 +282,7 @@ class FrontierStrategy(NoveltyStrategy):
         g = self.grid
         idx = np.indices(g.shape).reshape(g.dim, -1).T
         centres = g.origin + (idx + 0.5) * g.cell
-        base = self.robot.joint_positions(np.zeros(self.robot.dof))[0, : g.dim]
+        base = self.robot.base
         self._centres = centres
         self._in_reach = (np.linalg.norm(centres - base, axis=1)
                           <= 0.95 * self.robot.reach).reshape(g.shape)
