@@ -49,10 +49,10 @@ from wholearm_tools.fit.models import (
     InitContext,
     Model,
     perp_bases,
-    segment_min,
     signed_distance_np,
 )
 from wholearm_tools.fit.result import FitResult
+from wholearm_tools.geometry.base import segment_min_numeric
 
 LOSSES = ("linear", "huber", "cauchy")
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -254,7 +254,7 @@ def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarra
     def fn(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
     exact = _closed_form_min(m, th, side, a, b) if len(a) else None
-    val, t = exact if exact is not None else segment_min(fn, a, b)
+    val, t = exact if exact is not None else segment_min_numeric(fn, a, b)
     if m.linear or len(a) == 0:
         return val, t, np.zeros(len(a), dtype=bool)
     h = 1e-3

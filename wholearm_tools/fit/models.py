@@ -30,6 +30,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from wholearm_tools.geometry.base import segment_min_numeric
+
 FloatArray = np.ndarray
 
 #: numpy backend of the distance formulas
@@ -174,50 +176,9 @@ def refine_link_points(ctx: InitContext, sd_np: Callable[[FloatArray], FloatArra
     """Surface-point estimate per link: the segment point of least clearance under a guess."""
     if len(ctx.a) == 0:
         return np.zeros((0, ctx.tip.shape[1]))
-    _, t = segment_min(lambda p: side * sd_np(p), ctx.a, ctx.b)
+    _, t = segment_min_numeric(lambda p: side * sd_np(p), ctx.a, ctx.b)
     return ctx.a + t[:, None] * (ctx.b - ctx.a)
 
-
-def segment_min(fn: Callable[[FloatArray], FloatArray], a: FloatArray, b: FloatArray,
-                samples: int = 25, iterations: int = 32) -> tuple[FloatArray, FloatArray]:
-    """Minimum of ``fn`` along segments ``a[i]-b[i]`` (sampling + golden section).
-
-    Returns ``(value (N,), t (N,))``.
-    """
-    n, d = a.shape
-    if n == 0:
-        return np.zeros(0), np.zeros(0)
-    ts = np.linspace(0.0, 1.0, samples)
-    pts = a[:, None, :] + ts[None, :, None] * (b - a)[:, None, :]
-    vals = fn(pts.reshape(-1, d)).reshape(n, samples)
-    k = np.argmin(vals, axis=1)
-    step = 1.0 / (samples - 1)
-    lo = np.clip(ts[k] - step, 0.0, 1.0)
-    hi = np.clip(ts[k] + step, 0.0, 1.0)
-    g = (np.sqrt(5.0) - 1.0) / 2.0
-
-    def f(t: FloatArray) -> FloatArray:
-        return fn(a + t[:, None] * (b - a))
-
-    x1 = hi - g * (hi - lo)
-    x2 = lo + g * (hi - lo)
-    f1, f2 = f(x1), f(x2)
-    for _ in range(iterations):
-        left = f1 < f2
-        # keep [lo, x2] when f1 < f2 (the old x1 becomes the new x2), else [x1, hi]
-        hi = np.where(left, x2, hi)
-        lo = np.where(left, lo, x1)
-        nx1 = np.where(left, hi - g * (hi - lo), x2)
-        nx2 = np.where(left, x1, lo + g * (hi - lo))
-        xn = np.where(left, nx1, nx2)
-        fn_ = f(xn)
-        f1, f2 = np.where(left, fn_, f2), np.where(left, f1, fn_)
-        x1, x2 = nx1, nx2
-    t = 0.5 * (lo + hi)
-    cand_t = np.stack([t, np.zeros(n), np.ones(n)], axis=1)
-    cand_v = np.stack([f(t), vals[:, 0], vals[:, -1]], axis=1)
-    j = np.argmin(cand_v, axis=1)
-    return cand_v[np.arange(n), j], cand_t[np.arange(n), j]
 
 
 def _no_constraints(th: Sequence[Any]) -> list[Any]:
