@@ -10,6 +10,10 @@ overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace existing outputs (refused otherwise).")
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Machine-readable JSON on stdout.")
+fit_workers_option = click.option(
+    "--workers", type=click.IntRange(min=1), default=None,
+    help="Processes for the seed fits (default: one per core, at most 8; the map is the same "
+         "for any number).")
 seed_option = click.option("--seed", type=int, default=0, show_default=True,
                            help="Random seed (same seed, byte-identical output).")
 

@@ -11,6 +11,7 @@ from cli.options import (
     B_option,
     causal_option,
     command_topic_option,
+    fit_workers_option,
     joint_topic_option,
     json_option,
     loss_option,
@@ -52,11 +53,12 @@ def summary_lines(rec) -> list[str]:
 @robot_option
 @joint_topic_option
 @command_topic_option
+@fit_workers_option
 @json_option
 @overwrite_option
 def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, robot_file: Path | None,
-            joint_topic: str | None, command_topic: str | None, as_json: bool,
-            overwrite: bool) -> None:
+            joint_topic: str | None, command_topic: str | None, workers: int | None,
+            as_json: bool, overwrite: bool) -> None:
     """Reconstruct the environment of RUN: detect, classify with B, fit primitives."""
     from wholearm_tools.logs import read_run
     from wholearm_tools.pipeline import reconstruct, write_reconstruction
@@ -64,7 +66,7 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, robot_f
     prepare_output_dir(out_dir, ["map.json", "contacts.csv"], overwrite)
     data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
                     robot=robot_file, require_commands=True)
-    rec = reconstruct(data, B=B, causal=causal, loss=loss)
+    rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
     if not rec.surface_map.primitives:
         reason = "; ".join(rec.messages) or "no primitive explains the contacts"
         raise click.ClickException(f"{run}: nothing could be fitted ({reason})")

@@ -37,6 +37,8 @@ class ReconstructParams:
     noise : residual noise level [m]; None estimates it
     free_hints : number of robot poses sampled as free-space hints for the fits
     use_sweep : reject primitives that the robot's own motion cut through (:func:`robot_sweep`)
+    workers : processes for the seed fits (None: every core, at most 8); the map does not
+        depend on it
     """
 
     B: float = 0.02
@@ -46,6 +48,7 @@ class ReconstructParams:
     noise: float | None = None
     free_hints: int = 400
     use_sweep: bool = True
+    workers: int | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.B) and self.B > 0):
@@ -229,7 +232,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               loss: str = "huber", noise: float | None = None,
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
-              sweep: Any = None, base: NDArray | None = None,
+              sweep: Any = None, base: NDArray | None = None, workers: int | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
 
@@ -237,9 +240,23 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     once (see :func:`duplicate_groups`) and share the assignment of their representative.
     ``sweep`` (:func:`robot_sweep`) rules out primitives the robot's own motion cut through,
     ``base`` (the robot's base point) circles and spheres with free space inside that do not
-    hold it.
+    hold it.  ``workers``: processes for the seed fits (None: every core, at most 8; the map
+    does not depend on it).
     Poor data never raise: the map is then empty (or short) and ``messages`` say why.
     """
+    from wholearm_tools.fit.segment import seed_pool
+
+    with seed_pool(workers) as pool:
+        return _fit_table(table, planar=planar, B=B, kinds=kinds, loss=loss, noise=noise,
+                          free_points=free_points, meta=meta, noise_floor=noise_floor,
+                          merge_duplicates=merge_duplicates, sweep=sweep, base=base, pool=pool)
+
+
+def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None,
+               loss: str, noise: float | None, free_points: NDArray | None,
+               meta: dict[str, Any] | None, noise_floor: float, merge_duplicates: bool,
+               sweep: Any, base: NDArray | None, pool: Any,
+               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     from wholearm_tools.fit import fit_primitive, segment
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.mesh import support_extent
@@ -265,7 +282,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     data, order = fit_data_from_table(table, free_points, rows=reps)
     need = min(MODELS[k].dof for k in kinds) + 3
     seg = segment(data, kinds=kinds, noise=noise, noise_floor=noise_floor,
-                  min_radius=0.5 * float(B), sweep=sweep, base=base)
+                  min_radius=0.5 * float(B), sweep=sweep, base=base, executor=pool)
     if data.n_contacts < need:
         messages.append(f"too few distinct contacts to fit a primitive: {data.n_contacts} "
                         f"given, at least {need} needed (a {kinds[0]} has "
@@ -284,7 +301,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     all_fits = list(seg.primitives)
     # second look: unexplained contacts whose class is uncertain, as either class
     extra, swap = _other_interpretation(table, reps, seg_rows, free_points, kinds, seg.noise,
-                                        noise_floor, B, sweep, base)
+                                        noise_floor, B, sweep, base, pool)
     from wholearm_tools.fit import residuals as fit_residuals
 
     merged: set[int] = set()
@@ -429,7 +446,7 @@ UNCERTAIN_P_TIP = (0.1, 0.9)
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
                           noise_floor: float, B: float, sweep: Any = None,
-                          base: NDArray | None = None,
+                          base: NDArray | None = None, pool: Any = None,
                           ) -> tuple[list[tuple[Any, NDArray, Any]], NDArray]:
     """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
     (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.
@@ -466,7 +483,8 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     fit_rows = np.concatenate([tr, lr])
     fit_tip = np.concatenate([np.ones(len(tr), bool), np.zeros(len(lr), bool)])
     seg = segment(data, kinds=kinds, noise=max(sigma, noise_floor, 1e-12),
-                  noise_floor=noise_floor, min_radius=0.5 * float(B), sweep=sweep, base=base)
+                  noise_floor=noise_floor, min_radius=0.5 * float(B), sweep=sweep, base=base,
+                  executor=pool)
     out: list[tuple[Any, NDArray]] = []
     taken = np.zeros(len(table), dtype=bool)
     for k, fit in enumerate(seg.primitives):
@@ -559,7 +577,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
             sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None,
-            base=run.robot.base)
+            base=run.robot.base, workers=params.workers)
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

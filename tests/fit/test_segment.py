@@ -6,7 +6,7 @@ from fit_synth import contacts, merge, param_error, planar_scene, spatial_scene
 
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit import FitData
-from wholearm_tools.fit.segment import segment
+from wholearm_tools.fit.segment import seed_pool, segment
 
 
 def _check_scene(seg, prims, labels, data, tol):
@@ -57,6 +57,30 @@ def test_far_contacts_are_unexplained_and_result_is_deterministic():
     assert [r.kind for r in a.primitives] == ["circle"]
     # the three junk tips are contacts 25..27 (tips first)
     assert set(a.unexplained) >= {25, 26, 27}
+
+
+def test_seed_fits_in_worker_processes_give_the_same_segmentation():
+    """The seed fits run in a process pool give exactly the map fitted in one process: each
+    seed draws from its own generator, whichever process fits it."""
+    data, prims, labels = spatial_scene(np.random.default_rng(5), 0.002)
+    here = segment(data, rng=0)
+    with seed_pool(2) as pool:
+        assert pool is not None
+        there = segment(data, rng=0, executor=pool)
+    _check_scene(there, prims, labels, data, 0.02)
+    np.testing.assert_array_equal(there.assignment, here.assignment)
+    assert there.noise == here.noise
+    for a, b in zip(there.primitives, here.primitives, strict=True):
+        assert a.kind == b.kind
+        for name, v in a.params.items():
+            np.testing.assert_array_equal(v, b.params[name])
+
+
+def test_seed_pool_of_one_worker_fits_here_and_rejects_zero():
+    with seed_pool(1) as pool:
+        assert pool is None
+    with pytest.raises(InputError, match="workers must be at least 1"), seed_pool(0):
+        pass
 
 
 def test_too_few_contacts_gives_an_empty_segmentation():

@@ -45,7 +45,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import multiprocessing
+import os
+from collections.abc import Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,6 +213,126 @@ def _farthest_points(X: np.ndarray, k: int, rng: np.random.Generator) -> list[in
     return order
 
 
+def available_cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def seed_pool(workers: int | None = None) -> Iterator[Executor | None]:
+    """A process pool for :func:`segment`'s seed fits, shut down on exit; ``None`` (fit in this
+    process) for one worker or inside a daemonic process (a Dask or multiprocessing worker,
+    which may not start children).
+
+    ``workers`` None: every core this process may use, at most 8, or one in a process that is
+    itself a worker of a pool (``wholearm compare`` runs one reconstruction per core already).
+    Workers are forked where the platform can (they start in milliseconds, with the CasADi
+    solvers already built), else spawned."""
+    if workers is None:
+        nested = multiprocessing.parent_process() is not None
+        n = 1 if nested else min(available_cores(), 8)
+    else:
+        n = int(workers)
+    if n < 1:
+        raise InputError(f"workers must be at least 1, got {workers!r}")
+    if n == 1 or multiprocessing.current_process().daemon:
+        yield None
+        return
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
+    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+        yield pool
+
+
+@dataclass(frozen=True)
+class _SeedConfig:
+    """What every seed fit of one :func:`segment` pass shares (picklable: seed fits may run in
+    worker processes)."""
+
+    sizes: dict[str, int]
+    cheap: tuple[str, ...]
+    costly: tuple[str, ...]
+    trim_ok: bool
+    sigma: float
+    accept: float
+    max_iter: int
+    ransac_tol: float
+    key: int
+
+
+@dataclass(frozen=True)
+class _SeedJob:
+    """One seed: its contact, its nearest contacts (global indices, nearest first) and their
+    fit data (the contacts of ``near`` in ascending index order)."""
+
+    seed: int
+    trim: int
+    near: np.ndarray
+    data: FitData
+
+
+def _seed_job(s: int, trim: int, order: np.ndarray, data: FitData, cfg: _SeedConfig) -> _SeedJob:
+    near = order[s, :max(cfg.sizes.values()) + trim]
+    return _SeedJob(s, trim, near, data.take(near))
+
+
+def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, FitResult]]:
+    """Every cheap type fitted at one seed, and the costly ones where no cheap type fits in the
+    consensus pass (``trim`` > 0): ``(kind, members, fit)`` with global member indices.
+
+    Each type is fitted to the ``dof + 2`` contacts nearest the seed; in the consensus pass the
+    neighbourhood starts ``trim`` contacts larger, is cut to the RANSAC consensus of the type
+    and then loses its worst-fitting contact (never the seed) while the fit is poor: near the
+    intersection of two surfaces the nearest contacts mix both.  The random draws come from a
+    generator seeded by ``(cfg.key, seed, trim)``, so the result does not depend on which
+    process fits which seed, nor in which order."""
+    rng = np.random.default_rng([cfg.key, job.seed, job.trim])
+    glob = np.sort(job.near)
+
+    def take(members: np.ndarray) -> FitData:
+        return job.data.take(np.searchsorted(glob, members))
+
+    def one(kind: str, trim: int) -> tuple[np.ndarray, FitResult]:
+        size = cfg.sizes[kind]
+        members = np.sort(job.near[:size])
+        if trim and cfg.trim_ok:
+            nb = np.sort(job.near[:size + trim])
+            inl = consensus(kind, take(nb), int(np.flatnonzero(nb == job.seed)[0]),
+                            cfg.ransac_tol, rng)
+            if len(inl) >= size:
+                members = nb[inl]
+        if len(members) <= MODELS[kind].dof:
+            return members, fit_primitive(kind, take(members[:0]))
+        # (the cheap types only: a cone or torus cut off at a seed rarely gets there)
+        good = (cfg.accept * cfg.sigma if math.isfinite(cfg.sigma) and kind in cfg.cheap
+                else None)
+        f = fit_primitive(kind, take(members), max_iter=cfg.max_iter, good_rms=good)
+        while (cfg.trim_ok and len(members) > size and f
+               and _rms_dof(f) > cfg.accept * cfg.sigma):
+            r = np.abs(f.residuals)
+            r[members == job.seed] = -1.0
+            keep = np.delete(members, int(np.argmax(r)))
+            g = fit_primitive(kind, take(keep), max_iter=cfg.max_iter,
+                              free_side=f.free_side, initial=f.params)
+            if not g:
+                g = fit_primitive(kind, take(keep), max_iter=cfg.max_iter)
+            if not g:
+                break
+            members, f = keep, g
+        return members, f
+
+    fits = [(k, *one(k, job.trim)) for k in cfg.cheap]
+    # (only in the consensus pass: before it, most seeds next to an intersection straddle two
+    # surfaces, and a torus fits almost any such small mix)
+    if cfg.costly and job.trim and not any(f and _rms_dof(f) <= cfg.accept * cfg.sigma
+                                           for _, _, f in fits):
+        fits += [(k, *one(k, 0)) for k in cfg.costly]
+    return fits
+
+
 def segment(
     data: FitData,
     kinds: tuple[str, ...] | list[str] | None = None,
@@ -231,6 +356,7 @@ def segment(
     sweep_near: float = 0.015,
     base: ArrayLike | None = None,
     rng: int | np.random.Generator | None = 0,
+    executor: Executor | None = None,
 ) -> Segmentation:
     """Segment contacts into primitives by fit-and-grow with description-length selection.
 
@@ -287,6 +413,9 @@ def segment(
         The robot's base; see ``max_rel_std``.
     rng : seed or Generator
         Picks the first seed; the result is deterministic for a given seed.
+    executor : concurrent.futures.Executor or None
+        Runs the seed fits (most of the time of a segmentation), e.g. a process pool from
+        :func:`seed_pool`; None fits them here.  The result does not depend on it.
 
     Returns
     -------
@@ -303,6 +432,7 @@ def segment(
     if noise is not None and not (noise > 0 and math.isfinite(noise)):
         raise InputError(f"noise must be positive, got {noise!r}")
     rng = np.random.default_rng(rng)
+    pool = executor
     n = data.n_contacts
     seed_sizes = {k: int(seed_size or MODELS[k].dof + 2) for k in kinds}
     empty = Segmentation((), np.full(n, -1), float(noise or 0.0), 0.0)
@@ -328,54 +458,20 @@ def segment(
     cheap = tuple(k for k in kinds if MODELS[k].dof <= 5) or kinds
     costly = tuple(k for k in kinds if k not in cheap)
 
-    def seed_fit(s: int, kind: str, trim: int) -> tuple[np.ndarray, FitResult]:
-        """Fit ``kind`` to the contacts nearest ``s``, starting ``trim`` contacts larger than
-        the seed size and dropping the worst-fitting contact (never ``s``) while the fit is
-        poor: near the intersection of two surfaces the nearest contacts mix both."""
-        size = seed_sizes[kind]
-        members = np.sort(order[s, :size])
-        if trim and trim_ok:
-            nb = np.sort(order[s, :min(size + trim, n)])
-            inl = consensus(kind, data.take(nb), int(np.flatnonzero(nb == s)[0]),
-                            ransac_tol, rng)
-            if len(inl) >= size:
-                members = nb[inl]
-        if len(members) <= MODELS[kind].dof:
-            return members, fit_primitive(kind, data.take(members[:0]))
-        # (the cheap types only: a cone or torus cut off at a seed rarely gets there)
-        good = (seed_accept * sigma_seed if math.isfinite(sigma_seed) and kind in cheap
-                else None)
-        f = fit_primitive(kind, data.take(members), max_iter=seed_max_iter, good_rms=good)
-        while (trim_ok and len(members) > size and f
-               and _rms_dof(f) > seed_accept * sigma_seed):
-            r = np.abs(f.residuals)
-            r[members == s] = -1.0
-            keep = np.delete(members, int(np.argmax(r)))
-            g = fit_primitive(kind, data.take(keep), max_iter=seed_max_iter,
-                              free_side=f.free_side, initial=f.params)
-            if not g:
-                g = fit_primitive(kind, data.take(keep), max_iter=seed_max_iter)
-            if not g:
-                break
-            members, f = keep, g
-        return members, f
-
     def seeds_at(points: list[int], trim: int) -> list[list[tuple[str, np.ndarray, FitResult]]]:
-        out = []
-        for s in points:
-            fits = [(k, *seed_fit(s, k, trim)) for k in cheap]
-            # (only in the consensus pass: before it, most seeds next to an intersection
-            # straddle two surfaces, and a torus fits almost any such small mix)
-            if costly and trim and not any(f and _rms_dof(f) <= seed_accept * sigma_seed
-                                           for _, _, f in fits):
-                fits += [(k, *seed_fit(s, k, 0)) for k in costly]
-            out.append(fits)
-        return out
+        cfg = _SeedConfig(seed_sizes, cheap, costly, trim_ok, float(sigma_seed), seed_accept,
+                          seed_max_iter, ransac_tol, key)
+        jobs = [_seed_job(s, trim if trim_ok else 0, order, data, cfg) for s in points]
+        if pool is None or len(jobs) < 2:
+            return [_fit_seed(cfg, job) for job in jobs]
+        return list(pool.map(_fit_seed, [cfg] * len(jobs), jobs))
 
     # first pass (untrimmed) gives the noise estimate
     trim_ok = False
     sigma_seed = np.inf
     seeds = _farthest_points(X, max_seeds, rng)
+    key = int(rng.integers(2**63))  # each seed job draws from its own generator (see _fit_seed)
+    ransac_tol = math.inf
     seed_fits = seeds_at(seeds, 0)
 
     if noise is None:
