@@ -186,6 +186,15 @@ def test_cli_reconstruct_on_the_run(short_lab_run, tmp_path):
                                    str(tmp_path / "out")])
     assert out.exit_code == 0, out.output
     assert (tmp_path / "out" / "map.json").exists()
+    # the seed fits in one process or in two give the same files, byte for byte
+    one = CliRunner().invoke(cli, ["reconstruct", str(path), "--B", "0.02", "--workers", "1",
+                                   "-o", str(tmp_path / "one")])
+    assert one.exit_code == 0, one.output
+    for name in ("map.json", "contacts.csv"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "out" / name).read_bytes()
+    bad = CliRunner().invoke(cli, ["reconstruct", str(path), "--workers", "0", "-o",
+                                   str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "--workers" in bad.output
 
 
 def test_cli_reconstruct_without_contacts_exits_nonzero(tmp_path):
