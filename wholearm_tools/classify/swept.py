@@ -38,6 +38,8 @@ MAX_CELLS_3D = 8_000_000
 REACH_CELLS_3D = 150
 #: largest gap (samples) between rasterised poses of one capsule
 MAX_POSE_GAP = 100
+#: candidate cells tested per vectorised chunk of poses when rasterising
+_CHUNK_CANDIDATES = 16_000
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -286,7 +288,11 @@ def _raster_capsules(first: NDArray[np.int32], origin: FloatArray, res: float, a
     offs_flat = offs @ strides
     flat = first.reshape(-1)
     per_pose = n_ax * offs.shape[0]
-    chunk = max(1, 2_000_000 // per_pose)
+    # small chunks: the poses of one chunk are tested against the marks of the chunks before
+    # it, and consecutive poses overlap, so a chunk of thousands of poses re-tests the same
+    # cells thousands of times (16 000 candidates per chunk: 2.3x faster than 2 000 000 on a
+    # 3-D run, the same map)
+    chunk = max(1, _CHUNK_CANDIDATES // per_pose)
     for c0 in range(0, a.shape[0], chunk):
         aa, bb = a[c0:c0 + chunk], b[c0:c0 + chunk]
         P = aa.shape[0]
