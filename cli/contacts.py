@@ -1,8 +1,9 @@
 """``wholearm contacts RUN.mcap --B 0.02``: detected contacts, link in contact, tip probability.
 
-The CSV (``-o contacts.csv``) is the fit's contact table (``wholearm_tools.contact_table``, the
-file ``wholearm fit contacts.csv`` reads) with diagnostic columns appended, one row per contact
-in time order:
+The CSV (``-o contacts.csv``; ``-o contacts.parquet`` writes the same columns as typed Parquet,
+with the run, B and classification mode in the file's metadata) is the fit's contact table
+(``wholearm_tools.contact_table``, the file ``wholearm fit`` reads, either format) with
+diagnostic columns appended, one row per contact in time order:
 
 * the table's columns: ``t`` [s], ``link`` (0-based), ``p_tip`` (eq. 2, offline map, or causal
   with ``--causal``), ``label`` (tip / link / ambiguous), ``variance`` (σ² for the fit, m²),
@@ -26,7 +27,13 @@ from typing import Any
 
 import click
 
-from cli.options import check_output_file, json_option, overwrite_option
+from cli.options import (
+    check_output_file,
+    command_topic_option,
+    joint_topic_option,
+    json_option,
+    overwrite_option,
+)
 
 log = logging.getLogger(__name__)
 
@@ -79,32 +86,32 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
 @click.option("--causal", is_flag=True,
               help="Classify with the map as seen at each contact (default: whole run).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write the contacts as CSV (default: a table on stdout).")
+              help="Write the contacts as CSV, or Parquet for a .parquet name (default: a "
+                   "table on stdout).")
 @click.option("--robot", "robot_file", type=click.Path(dir_okay=False, exists=True,
                                                        path_type=Path), default=None,
               help="URDF file (default: the log's /robot_description).")
+@joint_topic_option
+@command_topic_option
 @json_option
 @overwrite_option
 def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: Path | None,
-            as_json: bool, overwrite: bool) -> None:
+            joint_topic: str | None, command_topic: str | None, as_json: bool,
+            overwrite: bool) -> None:
     """Detect the contacts of RUN, identify the link, and classify tip vs link body."""
-    from wholearm_tools._io import atomic_output
+    from wholearm_tools._tables import write_rows
     from wholearm_tools.logs import read_run
 
     if not B > 0:
         raise click.BadParameter(f"must be a positive length in metres, got {B}", param_hint="--B")
     if output is not None:
         check_output_file(output, overwrite)
-    data = read_run(run, robot=robot_file, require_commands=True)
+    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,
+                    require_commands=True)
     fields, rows = contact_rows(data, B, causal)
     log.info("%d contacts in %s", len(rows), run)
     if output is not None:
-        buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-        with atomic_output(output, "w") as fh:
-            fh.write(buf.getvalue())
+        write_rows(output, fields, rows, meta={"run": str(run), "B": B, "causal": causal})
     if as_json:
         click.echo(json.dumps({"run": str(run), "B": B, "causal": causal, "contacts": rows},
                               indent=2))

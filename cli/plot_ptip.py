@@ -12,7 +12,12 @@ from pathlib import Path
 
 import click
 
-from cli.options import check_output_file, overwrite_option
+from cli.options import (
+    check_output_file,
+    command_topic_option,
+    joint_topic_option,
+    overwrite_option,
+)
 
 
 @click.command("plot-ptip")
@@ -26,9 +31,11 @@ from cli.options import check_output_file, overwrite_option
 @click.option("--robot", "robot_file", type=click.Path(dir_okay=False, exists=True,
                                                        path_type=Path), default=None,
               help="URDF file (default: the log's /robot_description).")
+@joint_topic_option
+@command_topic_option
 @overwrite_option
 def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | None,
-            overwrite: bool) -> None:
+            joint_topic: str | None, command_topic: str | None, overwrite: bool) -> None:
     """Plot every contact's tip probability over time (causal replay, Figure 4)."""
     import numpy as np
 
@@ -40,7 +47,8 @@ def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | No
     if not B > 0:
         raise click.BadParameter(f"must be a positive length in metres, got {B}", param_hint="--B")
     check_output_file(output, overwrite)
-    data = read_run(run, robot=robot_file, require_commands=True)
+    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,
+                    require_commands=True)
     contacts = detect_contacts(data.log, data.robot)
     grid = swept_map(data.robot, data.log.q, B=B)
     times = np.linspace(data.log.t[0], data.log.t[-1], steps)

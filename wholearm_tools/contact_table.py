@@ -154,7 +154,12 @@ class ContactTable:
 
     @classmethod
     def from_csv(cls, text: str, source: str = "contacts.csv") -> ContactTable:
-        rows = list(csv.DictReader(io.StringIO(text)))
+        return cls.from_rows(list(csv.DictReader(io.StringIO(text))), source)
+
+    @classmethod
+    def from_rows(cls, rows: list[dict[str, str]], source: str = "contacts.csv"
+                  ) -> ContactTable:
+        """From the rows of a contacts table, every cell as text (CSV or Parquet)."""
         if not rows:
             raise InputError(f"{source}: no contacts (empty table or header only)")
         cols = rows[0].keys()
@@ -206,10 +211,8 @@ def write_contact_table(path: str | Path, table: ContactTable) -> None:
 
 
 def read_contact_table(path: str | Path) -> ContactTable:
-    """Read a contacts.csv written by :func:`write_contact_table` (or by hand, same columns)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read contacts ({exc.strerror})") from None
-    return ContactTable.from_csv(text, source=str(path))
+    """Read a contacts table written by :func:`write_contact_table` or ``wholearm contacts``
+    (CSV, or Parquet by the ``.parquet`` suffix; or by hand, same columns)."""
+    from wholearm_tools._tables import read_rows
+
+    return ContactTable.from_rows(read_rows(path), source=str(path))

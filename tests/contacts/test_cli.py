@@ -52,6 +52,48 @@ def test_fit_reads_the_contacts_csv(mcap: Path, tmp_path: Path) -> None:
     assert json.loads((tmp_path / "map.json").read_text())["format"] == "wholearm-map"
 
 
+def test_contacts_parquet_holds_the_csv_columns_typed(mcap: Path, tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from wholearm_tools._tables import read_meta
+
+    csv_out, pq_out = tmp_path / "contacts.csv", tmp_path / "contacts.parquet"
+    assert run("contacts", str(mcap), "--B", "0.02", "-o", str(csv_out)).exit_code == 0
+    res = run("contacts", str(mcap), "--B", "0.02", "-o", str(pq_out))
+    assert res.exit_code == 0, res.output
+    table = pq.read_table(pq_out)
+    with csv_out.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert table.column_names == list(rows[0])
+    assert table.num_rows == len(rows)
+    assert table.schema.field("link").type == pa.int64()
+    assert table.schema.field("p_tip").type == pa.float64()
+    assert table.schema.field("label").type == pa.string()
+    assert table.column("primitive").null_count == 0  # -1 before fitting
+    assert table.column("residual").null_count == len(rows)  # empty before fitting
+    p_tip = table.column("p_tip").to_pylist()
+    assert p_tip == [float(r["p_tip"]) for r in rows]
+    assert read_meta(pq_out) == {"run": str(mcap), "B": 0.02, "causal": False}
+    # the fit reads either file and fits the same map
+    for src, name in ((csv_out, "a.json"), (pq_out, "b.json")):
+        assert run("fit", str(src), "-o", str(tmp_path / name)).exit_code == 0
+    a = json.loads((tmp_path / "a.json").read_text())
+    b = json.loads((tmp_path / "b.json").read_text())
+    assert a["primitives"] and a["primitives"] == b["primitives"]
+
+
+def test_fit_of_a_broken_parquet_file_is_a_one_line_error(tmp_path: Path) -> None:
+    bad = tmp_path / "contacts.parquet"
+    bad.write_bytes(b"PAR1 not really")
+    res = run("fit", str(bad), "-o", str(tmp_path / "map.json"))
+    assert res.exit_code != 0
+    assert "Traceback" not in res.output
+    errors = [line for line in res.output.splitlines() if line.startswith("Error")]
+    assert len(errors) == 1 and str(bad) in errors[0], res.output
+    assert not (tmp_path / "map.json").exists()
+
+
 def test_contacts_json_and_table(mcap: Path) -> None:
     res = run("contacts", str(mcap), "--B", "0.02", "--json", "--causal")
     assert res.exit_code == 0, res.output
@@ -90,6 +132,22 @@ def test_bad_file_is_a_one_line_error(command: str, tmp_path: Path) -> None:
     errors = [line for line in res.output.splitlines() if line.startswith("Error")]
     assert len(errors) == 1, res.output
     assert not (tmp_path / "p.png").exists()
+
+
+@pytest.mark.parametrize("command", ["contacts", "plot-ptip", "report"])
+def test_topics_are_selectable(command: str, mcap: Path, tmp_path: Path) -> None:
+    out = {"contacts": [], "plot-ptip": ["-o", str(tmp_path / "p.png")],
+           "report": ["-o", str(tmp_path / "r.pdf")]}[command]
+    res = run(command, str(mcap), "--B", "0.02", "--joint-topic", "/arm/joint_states", *out)
+    assert res.exit_code == 1
+    assert "no JointState topic '/arm/joint_states'" in res.output
+    assert "/joint_states" in res.output  # the topics the log has
+    if command == "contacts":
+        named = run(command, str(mcap), "--B", "0.02", "--joint-topic", "/joint_states",
+                    "--command-topic", "/joint_commands", "--json")
+        assert named.exit_code == 0, named.output
+        assert json.loads(named.output)["contacts"] == json.loads(
+            run(command, str(mcap), "--B", "0.02", "--json").output)["contacts"]
 
 
 def test_existing_output_is_refused(mcap: Path, tmp_path: Path) -> None:
