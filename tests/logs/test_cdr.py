@@ -209,3 +209,21 @@ def test_big_endian_message_goes_through_the_stock_decoder(tmp_path):
     assert cols.fast_messages == 2
     np.testing.assert_array_equal(cols.stamp_ns, [10, 15, 20])
     np.testing.assert_array_equal(cols.position, [[0, 1, 2], [7, 8, 9], [3, 4, 5]])
+
+
+def test_decoded_columns_do_not_keep_the_payload_buffer_alive():
+    """Every decoded column owns its memory: a view of the payloads (an empty effort field is
+    one, as an empty slice counts as contiguous) would keep each decompressed chunk alive
+    until the whole log is read (peak memory 5x the decoded arrays on a 1M-message log)."""
+    names = ("joint_1", "joint_2", "joint_3")
+    q = np.arange(12.0).reshape(4, 3)
+    rows = cdr.encode_joint_states(np.arange(4), names, q, q + 1.0, None)
+    batch = cdr.decode_joint_states(rows, cdr.joint_state_layout(rows[0].tobytes()))
+    assert batch.effort.shape == (4, 0)
+    np.testing.assert_array_equal(batch.position, q)
+    for column in (batch.stamp_ns, batch.position, batch.velocity, batch.effort):
+        chain = []
+        while column is not None:
+            chain.append(column)
+            column = column.base
+        assert not any(a is rows or a is rows.base for a in chain)

@@ -175,6 +175,10 @@ def decode_joint_states(rows: NDArray[np.uint8], layout: JointStateLayout) -> Jo
     n = rows.shape[0]
 
     def column(start: int, count: int, dtype: str) -> NDArray:
+        if count == 0:
+            # (an empty slice counts as contiguous, so ascontiguousarray would return a view
+            # that keeps the whole decompressed chunk alive)
+            return np.zeros((n, 0), dtype)
         width = count * np.dtype(dtype).itemsize
         block = np.ascontiguousarray(rows[:, start:start + width])
         return block.view(dtype).reshape(n, count)

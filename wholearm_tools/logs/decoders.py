@@ -151,7 +151,9 @@ class _JointStateAccumulator(TopicDecoder):
             names.extend(x for x in block_names if x not in names)
         lookup = {name: i for i, name in enumerate(names)}
         total = self.count
-        out = [np.full((total, len(names)), np.nan) for _ in range(3)]
+        # fields no message carries are allocated after the blocks are released (peak memory)
+        carried = [any(block[4][k].shape[1] for block in self.blocks) for k in range(3)]
+        out = [np.full((total, len(names)), np.nan) if c else None for c in carried]
         stamps = np.zeros(total, np.int64)
         log_times = np.zeros(total, np.int64)
         filled = np.zeros(total, dtype=bool)
@@ -167,7 +169,7 @@ class _JointStateAccumulator(TopicDecoder):
             log_times[rows] = log_time
             filled[rows] = True
             for target, arr in zip(out, fields, strict=True):
-                if arr.shape[1] == 0:
+                if target is None or arr.shape[1] == 0:
                     continue
                 if cols == list(range(len(names))):
                     target[rows] = arr
@@ -177,7 +179,10 @@ class _JointStateAccumulator(TopicDecoder):
                     target[np.ix_(rows, np.asarray(cols))] = arr
         if not filled.all():  # pragma: no cover - every message lands in exactly one block
             raise self.error("internal error: messages lost while decoding")
-        return JointStateColumns(tuple(names), stamps, log_times, *out, fast_messages=self.fast)
+        position, velocity, effort = (np.full((total, len(names)), np.nan) if a is None else a
+                                      for a in out)
+        return JointStateColumns(tuple(names), stamps, log_times, position, velocity, effort,
+                                 fast_messages=self.fast)
 
 
 def _rows(buf: NDArray[np.uint8], starts: NDArray[np.int64], length: int) -> NDArray[np.uint8]:
