@@ -194,7 +194,8 @@ def test_cli_reconstruct_on_the_run(short_lab_run, tmp_path):
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "out" / name).read_bytes()
     bad = CliRunner().invoke(cli, ["reconstruct", str(path), "--workers", "0", "-o",
                                    str(tmp_path / "bad")])
-    assert bad.exit_code == 2 and "--workers" in bad.output
+    assert bad.exit_code == 2
+    assert "--workers" in bad.output
 
 
 def test_cli_reconstruct_without_contacts_exits_nonzero(tmp_path):

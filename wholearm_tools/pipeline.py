@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,6 +54,8 @@ class ReconstructParams:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.B) and self.B > 0):
             raise InputError(f"B must be a positive length in metres, got {self.B}")
+        if self.workers is not None and not (int(self.workers) == self.workers >= 1):
+            raise InputError(f"workers must be a positive integer, got {self.workers!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -255,7 +258,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
 def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None,
                loss: str, noise: float | None, free_points: NDArray | None,
                meta: dict[str, Any] | None, noise_floor: float, merge_duplicates: bool,
-               sweep: Any, base: NDArray | None, pool: Any,
+               sweep: Any, base: NDArray | None, pool: Executor | None,
                ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     from wholearm_tools.fit import fit_primitive, segment
     from wholearm_tools.fit.models import MODELS
@@ -446,7 +449,7 @@ UNCERTAIN_P_TIP = (0.1, 0.9)
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
                           noise_floor: float, B: float, sweep: Any = None,
-                          base: NDArray | None = None, pool: Any = None,
+                          base: NDArray | None = None, pool: Executor | None = None,
                           ) -> tuple[list[tuple[Any, NDArray, Any]], NDArray]:
     """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
     (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.

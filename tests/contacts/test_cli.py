@@ -80,7 +80,8 @@ def test_contacts_parquet_holds_the_csv_columns_typed(mcap: Path, tmp_path: Path
         assert run("fit", str(src), "-o", str(tmp_path / name)).exit_code == 0
     a = json.loads((tmp_path / "a.json").read_text())
     b = json.loads((tmp_path / "b.json").read_text())
-    assert a["primitives"] and a["primitives"] == b["primitives"]
+    assert a["primitives"]
+    assert a["primitives"] == b["primitives"]
 
 
 def test_fit_of_a_broken_parquet_file_is_a_one_line_error(tmp_path: Path) -> None:
@@ -90,7 +91,8 @@ def test_fit_of_a_broken_parquet_file_is_a_one_line_error(tmp_path: Path) -> Non
     assert res.exit_code != 0
     assert "Traceback" not in res.output
     errors = [line for line in res.output.splitlines() if line.startswith("Error")]
-    assert len(errors) == 1 and str(bad) in errors[0], res.output
+    assert len(errors) == 1, res.output
+    assert str(bad) in errors[0]
     assert not (tmp_path / "map.json").exists()
 
 

@@ -432,7 +432,6 @@ def segment(
     if noise is not None and not (noise > 0 and math.isfinite(noise)):
         raise InputError(f"noise must be positive, got {noise!r}")
     rng = np.random.default_rng(rng)
-    pool = executor
     n = data.n_contacts
     seed_sizes = {k: int(seed_size or MODELS[k].dof + 2) for k in kinds}
     empty = Segmentation((), np.full(n, -1), float(noise or 0.0), 0.0)
@@ -462,16 +461,16 @@ def segment(
         cfg = _SeedConfig(seed_sizes, cheap, costly, trim_ok, float(sigma_seed), seed_accept,
                           seed_max_iter, ransac_tol, key)
         jobs = [_seed_job(s, trim if trim_ok else 0, order, data, cfg) for s in points]
-        if pool is None or len(jobs) < 2:
+        if executor is None or len(jobs) < 2:
             return [_fit_seed(cfg, job) for job in jobs]
-        return list(pool.map(_fit_seed, [cfg] * len(jobs), jobs))
+        return list(executor.map(_fit_seed, [cfg] * len(jobs), jobs))
 
     # first pass (untrimmed) gives the noise estimate
     trim_ok = False
     sigma_seed = np.inf
     seeds = _farthest_points(X, max_seeds, rng)
     key = int(rng.integers(2**63))  # each seed job draws from its own generator (see _fit_seed)
-    ransac_tol = math.inf
+    ransac_tol = math.inf  # (no consensus before the noise level is known)
     seed_fits = seeds_at(seeds, 0)
 
     if noise is None:
