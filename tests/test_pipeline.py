@@ -211,6 +211,16 @@ def test_cli_reconstruct_without_contacts_exits_nonzero(tmp_path):
     assert "Traceback" not in out.output
 
 
+def test_reconstruct_params_reject_a_bad_number_of_workers():
+    from wholearm_tools.errors import InputError
+    from wholearm_tools.pipeline import ReconstructParams
+
+    for bad in (0, -1, 1.5):
+        with pytest.raises(InputError, match="workers must be a positive integer"):
+            ReconstructParams(workers=bad)
+    assert ReconstructParams(workers=2).workers == 2
+
+
 def test_same_input_gives_the_same_map():
     rng = np.random.default_rng(7)
     tips = _circle_tips(14) + 2e-4 * rng.normal(size=(14, 2))
