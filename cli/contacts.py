@@ -18,8 +18,6 @@ diagnostic columns appended, one row per contact in time order:
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import logging
 from pathlib import Path
@@ -51,9 +49,7 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
     contacts = detect_contacts(run.log, run.robot)
     cls = tip_probability(run, contacts, B, causal=causal)
     table = contact_table(run.robot, contacts, cls)
-    reader = csv.DictReader(io.StringIO(table.to_csv()))
-    base = list(reader)
-    header = list(reader.fieldnames or [])
+    header, base = table.rows()
     match = match_truth(contacts, run.truth) if run.truth is not None else None
     names = run.robot.joint_names
     extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "t_end",

@@ -34,12 +34,17 @@ def write_rows(path: str | Path, fields: Sequence[str], rows: Sequence[Mapping[s
     if is_parquet(path):
         _write_parquet(path, fields, rows, meta)
         return
+    with atomic_output(path, "w") as fh:
+        fh.write(csv_text(fields, rows))
+
+
+def csv_text(fields: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
+    """``rows`` as CSV text with header ``fields`` (``\n`` line ends)."""
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(fields), lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    with atomic_output(path, "w") as fh:
-        fh.write(buf.getvalue())
+    return buf.getvalue()
 
 
 def read_rows(path: str | Path) -> list[dict[str, str]]:

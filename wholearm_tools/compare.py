@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from wholearm_tools._io import atomic_path, write_text_atomic
+from wholearm_tools._parallel import available_cores
 from wholearm_tools.errors import InputError, WholearmError
 
 #: output file names written by :func:`write_comparison`
@@ -329,7 +330,8 @@ def compare_runs(paths: Iterable[str | os.PathLike[str]], Bs: Iterable[float], *
     Bs : B values [m], positive (duplicates dropped)
     scheduler : None (local processes), a Dask scheduler address ``"tcp://host:port"``, or a
         ``distributed.Client``.  Dask workers must see the logs at the same (absolute) paths.
-    workers : local processes, default ``min(pairs, os.cpu_count())``; 1 runs in this process.
+    workers : local processes, default ``min(pairs, cores this process may use)``; 1 runs in
+        this process.
         Ignored with a Dask scheduler (the cluster decides).
     read_options : keyword arguments of :func:`wholearm_tools.logs.read_run` (robot, topics)
     reconstruct : the reconstruction function (default :func:`wholearm_tools.pipeline
@@ -380,7 +382,8 @@ def _check_Bs(Bs: Iterable[float]) -> list[float]:  # noqa: N802
 
 def _run_local(task: Callable[..., dict[str, Any]], pairs: Sequence[tuple[str, float]],
                options: dict[str, Any], workers: int | None) -> list[dict[str, Any]]:
-    n = min(len(pairs), workers or os.cpu_count() or 1, os.cpu_count() or 1)
+    cores = available_cores()
+    n = min(len(pairs), workers or cores, cores)
     if n <= 1:
         return [task(p, b, options) for p, b in pairs]
     from concurrent.futures import ProcessPoolExecutor

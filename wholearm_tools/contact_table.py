@@ -130,27 +130,33 @@ class ContactTable:
         return replace(self, p_tip_map=p_tip_map, label_map=label_map)
 
     # ------------------------------------------------------------------ CSV
-    def to_csv(self) -> str:
+    def rows(self) -> tuple[list[str], list[dict[str, str]]]:
+        """The CSV header and one dict per contact, every cell as the CSV writes it."""
         axes = "xyz"[: self.dim]
         header = ["t", "link", "p_tip", "label", "variance", "used_as",
                   *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
                   *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual",
                   "p_tip_map", "label_map"]
-        out = io.StringIO()
-        writer = csv.writer(out, lineterminator="\n")
-        writer.writerow(header)
+        rows = []
         for i in range(len(self)):
             residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
             p_map = "" if not np.isfinite(self.p_tip_map[i]) else f"{self.p_tip_map[i]:.6f}"
-            writer.writerow([
-                f"{self.t[i]:.6f}", int(self.link[i]), f"{self.p_tip[i]:.6f}", self.label[i],
-                f"{self.variance[i]:.9g}", "tip" if self.used_as_tip[i] else "link",
+            cells = [
+                f"{self.t[i]:.6f}", str(int(self.link[i])), f"{self.p_tip[i]:.6f}",
+                str(self.label[i]), f"{self.variance[i]:.9g}",
+                "tip" if self.used_as_tip[i] else "link",
                 *[f"{v:.9g}" for v in self.tip_center[i]], f"{self.tip_radius[i]:.9g}",
                 *[f"{v:.9g}" for v in self.seg_a[i]], *[f"{v:.9g}" for v in self.seg_b[i]],
-                f"{self.link_radius[i]:.9g}", int(self.primitive[i]), residual,
-                p_map, self.label_map[i],
-            ])
-        return out.getvalue()
+                f"{self.link_radius[i]:.9g}", str(int(self.primitive[i])), residual,
+                p_map, str(self.label_map[i]),
+            ]
+            rows.append(dict(zip(header, cells, strict=True)))
+        return header, rows
+
+    def to_csv(self) -> str:
+        from wholearm_tools._tables import csv_text
+
+        return csv_text(*self.rows())
 
     @classmethod
     def from_csv(cls, text: str, source: str = "contacts.csv") -> ContactTable:

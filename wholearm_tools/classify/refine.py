@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wholearm_tools.errors import InputError
+from wholearm_tools.geometry.base import segment_min_numeric
 
 FloatArray = NDArray[np.float64]
 
@@ -182,8 +183,6 @@ class _Enclosure(_View):
     cylinder.  The union has no closed-form segment distance: it is minimised numerically."""
 
     def segment_clearance(self, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
-        from wholearm_tools.geometry.base import segment_min_numeric
-
         val, t = segment_min_numeric(self.clearance, a, b)
         return np.asarray(val), np.asarray(t)
 

@@ -180,7 +180,6 @@ def refine_link_points(ctx: InitContext, sd_np: Callable[[FloatArray], FloatArra
     return ctx.a + t[:, None] * (ctx.b - ctx.a)
 
 
-
 def _no_constraints(th: Sequence[Any]) -> list[Any]:
     return []
 

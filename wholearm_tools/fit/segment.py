@@ -48,7 +48,6 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
-import os
 from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
@@ -56,6 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wholearm_tools._parallel import available_cores
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.core import (
     consensus,
@@ -211,14 +211,6 @@ def _farthest_points(X: np.ndarray, k: int, rng: np.random.Generator) -> list[in
         order.append(i)
         dmin = np.minimum(dmin, np.linalg.norm(X - X[i], axis=1))
     return order
-
-
-def available_cores() -> int:
-    """CPU cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 @contextlib.contextmanager
