@@ -227,3 +227,77 @@ def test_decoded_columns_do_not_keep_the_payload_buffer_alive():
             chain.append(column)
             column = column.base
         assert not any(a is rows or a is rows.base for a in chain)
+
+
+def _wide_log(tmp_path, n=5000):
+    """A multi-chunk ROS 2 log of ``n`` JointState messages (positions and velocities)."""
+    from wholearm_tools.logs import JointLog, Run, write_run
+    from wholearm_tools.robot import RobotModel
+
+    spec = {"joints": [{"name": f"joint_{i + 1}", "origin": [0.2 * (i > 0), 0, 0],
+                        "radius": 0.03} for i in range(3)], "tip": {"offset": [0.1, 0, 0]}}
+    robot = RobotModel.from_spec(spec, name="three")
+    t = np.arange(n) * 2e-3
+    q = np.sin(t[:, None] + np.arange(3))
+    log = JointLog(robot.joint_names, t, q, np.cos(t[:, None] + np.arange(3)))
+    path = tmp_path / "wide.mcap"
+    write_run(path, Run(robot=robot, log=log), chunk_size=16 * 1024)
+    return path, log
+
+
+@pytest.mark.parametrize("hint", ["none", "exact", "too_few", "too_many"])
+def test_summary_message_count_is_only_a_sizing_hint(tmp_path, monkeypatch, hint):
+    """With the summary's count the columns are filled in place (no blocks kept); a missing,
+    short or long count gives exactly the same columns."""
+    import wholearm_tools.logs.scan as scan_module
+
+    path, log = _wide_log(tmp_path)
+    reference = scan_mcap(path).decoded["/joint_states"]
+    real = scan_module._summary_counts
+    change = {"none": None, "exact": 0, "too_few": -700, "too_many": 700}[hint]
+    monkeypatch.setattr(scan_module, "_summary_counts", lambda handle: {} if change is None else
+                        {cid: count + change for cid, count in real(handle).items()})
+    cols = scan_mcap(path).decoded["/joint_states"]
+    assert cols.names == reference.names == log.joint_names
+    assert cols.n_messages == 5000
+    for field in ("stamp_ns", "log_time_ns", "position", "velocity"):
+        np.testing.assert_array_equal(getattr(cols, field), getattr(reference, field))
+    np.testing.assert_array_equal(cols.position, log.q)
+    assert cols.effort.shape == (5000, 3)
+    assert np.isnan(cols.effort).all()
+
+
+def test_summary_counts_are_absent_for_a_file_cut_short(tmp_path):
+    from wholearm_tools.logs.scan import _summary_counts
+
+    path, _ = _wide_log(tmp_path)
+    with path.open("rb") as handle:
+        counts = _summary_counts(handle)
+    assert 5000 in counts.values()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with cut.open("rb") as handle:
+        assert _summary_counts(handle) == {}
+
+
+def test_joint_log_adopts_frozen_columns_and_copies_writable_ones():
+    """The reader hands its read-only columns over (the log is held once); a caller's writable
+    array is copied, never frozen under the caller's feet."""
+    from wholearm_tools.logs import JointLog
+
+    t = np.arange(4.0)
+    q = np.zeros((4, 2))
+    frozen = np.ones((4, 2))
+    frozen.setflags(write=False)
+    log = JointLog(("a", "b"), t, q, frozen)
+    assert log.qd is frozen
+    assert log.q is not q
+    assert not np.shares_memory(log.q, q)
+    assert q.flags.writeable
+    assert not log.q.flags.writeable
+    q[0, 0] = 5.0
+    assert log.q[0, 0] == 0.0
+    big = np.ones((8, 2))
+    big.setflags(write=False)
+    view = big[::2]  # read-only, but a view: whoever owns the base could still change it
+    assert not np.shares_memory(JointLog(("a", "b"), t, q, view).qd, big)

@@ -97,6 +97,10 @@ class TopicDecoder(ABC):
     def error(self, what: str) -> LogFormatError:
         return LogFormatError(f"{self.source}: topic {self.channel.topic!r}: {what}")
 
+    def expect(self, count: int) -> None:  # noqa: B027 - optional hint
+        """The file's summary says the channel has ``count`` messages (a sizing hint: a
+        decoder may preallocate, but must still cope with more, fewer or none)."""
+
     @abstractmethod
     def add(self, buf: NDArray[np.uint8], starts: NDArray[np.int64], lengths: NDArray[np.int64],
             log_time: NDArray[np.int64]) -> None:
@@ -126,15 +130,72 @@ class TopicDecoder(ABC):
 
 
 # ---------------------------------------------------------------------------- JointState
+class _Direct:
+    """Final columns filled in place while every block has the first block's joints and
+    fields, sized by the summary's message count (no blocks are kept, so the peak is the
+    columns plus one chunk)."""
+
+    def __init__(self, names: tuple[str, ...], carried: list[bool], count: int) -> None:
+        self.names = names
+        self.carried = carried
+        self.count = count
+        n = len(names)
+        self.stamps = np.empty(count, np.int64)
+        self.log_times = np.empty(count, np.int64)
+        self.fields = [np.empty((count, n)) if c else None for c in carried]
+        self.filled = np.zeros(count, dtype=bool)
+
+    def accepts(self, names: tuple[str, ...], fields: list[NDArray], index: NDArray) -> bool:
+        return (names == self.names and int(index.max()) < self.count
+                and [f.shape[1] > 0 for f in fields] == self.carried)
+
+    def write(self, index: NDArray[np.int64], stamp: NDArray, log_time: NDArray,
+              fields: list[NDArray]) -> None:
+        rows = _as_rows(index)
+        self.stamps[rows] = stamp
+        self.log_times[rows] = log_time
+        self.filled[rows] = True
+        for target, arr in zip(self.fields, fields, strict=True):
+            if target is not None:
+                target[rows] = arr
+
+    def block(self) -> tuple[tuple[str, ...], NDArray, NDArray, NDArray, list[NDArray]]:
+        """What was written so far, as one ordinary block."""
+        rows = np.flatnonzero(self.filled)
+        empty = np.zeros((rows.shape[0], 0))
+        return (self.names, rows, self.stamps[rows], self.log_times[rows],
+                [empty if f is None else f[rows] for f in self.fields])
+
+
+def _as_rows(index: NDArray[np.int64]) -> slice | NDArray[np.int64]:
+    """``index`` as a slice when it is a run of consecutive rows (a cheap, copy-free write)."""
+    k = index.shape[0]
+    if k and int(index[-1]) - int(index[0]) == k - 1 and np.all(np.diff(index) == 1):
+        return slice(int(index[0]), int(index[0]) + k)
+    return index
+
+
+def _missing(rows: int, cols: int) -> NDArray[np.float64]:
+    """A field no message carries: NaN everywhere, as a read-only broadcast (no memory)."""
+    return np.broadcast_to(np.float64(np.nan), (rows, cols))
+
+
 class _JointStateAccumulator(TopicDecoder):
     """Collects blocks ``(names, message indices, stamp, log_time, [position, velocity,
-    effort])``; ``result`` scatters them back into file order."""
+    effort])``; ``result`` scatters them back into file order.  With the summary's message
+    count (``expect``) the blocks are written straight into the final columns instead, for as
+    long as every block has the first block's joints and fields."""
 
     def __init__(self, channel: ChannelInfo, source: str) -> None:
         super().__init__(channel, source)
         self.blocks: list[tuple[tuple[str, ...], NDArray, NDArray, NDArray, list[NDArray]]] = []
         self.fast = 0
         self.count = 0
+        self._expected = 0
+        self._direct: _Direct | None = None
+
+    def expect(self, count: int) -> None:
+        self._expected = int(count)
 
     def add_block(self, names: tuple[str, ...], index: NDArray[np.int64], stamp: NDArray,
                   log_time: NDArray, fields: list[NDArray]) -> None:
@@ -143,28 +204,42 @@ class _JointStateAccumulator(TopicDecoder):
             if arr.shape[1] not in (0, n):
                 raise self.error(f"message {int(index[0])} has {n} names but {arr.shape[1]} "
                                  f"{label} values")
+        if (self._direct is None and not self.blocks and self._expected
+                and len(set(names)) == n):
+            self._direct = _Direct(names, [f.shape[1] > 0 for f in fields], self._expected)
+        if self._direct is not None:
+            if self._direct.accepts(names, fields, index):
+                self._direct.write(index, stamp, log_time, fields)
+                return
+            self.blocks.append(self._direct.block())  # a new layout: back to blocks
+            self._direct = None
         self.blocks.append((names, index, stamp, log_time, fields))
 
     def result(self) -> JointStateColumns:
+        d = self._direct
+        if d is not None and self.count == d.count and d.filled.all():
+            self._direct = None
+            return JointStateColumns(d.names, d.stamps, d.log_times,
+                                     *(_missing(d.count, len(d.names)) if f is None else f
+                                       for f in d.fields), fast_messages=self.fast)
+        if d is not None:  # fewer messages than the summary said
+            self.blocks.append(d.block())
+            self._direct = None
         names: list[str] = []
         for block_names, *_ in self.blocks:
             names.extend(x for x in block_names if x not in names)
         lookup = {name: i for i, name in enumerate(names)}
         total = self.count
-        # fields no message carries are allocated after the blocks are released (peak memory)
         carried = [any(block[4][k].shape[1] for block in self.blocks) for k in range(3)]
         out = [np.full((total, len(names)), np.nan) if c else None for c in carried]
         stamps = np.zeros(total, np.int64)
         log_times = np.zeros(total, np.int64)
         filled = np.zeros(total, dtype=bool)
         self.blocks.reverse()
-        while self.blocks:  # release each block once copied: peak = columns + one block
+        while self.blocks:  # release each block once copied
             block_names, index, stamp, log_time, fields = self.blocks.pop()
             cols = [lookup[x] for x in block_names]
-            k = index.shape[0]
-            rows: slice | NDArray = index
-            if k and int(index[-1]) - int(index[0]) == k - 1 and np.all(np.diff(index) == 1):
-                rows = slice(int(index[0]), int(index[0]) + k)
+            rows = _as_rows(index)
             stamps[rows] = stamp
             log_times[rows] = log_time
             filled[rows] = True
@@ -179,7 +254,7 @@ class _JointStateAccumulator(TopicDecoder):
                     target[np.ix_(rows, np.asarray(cols))] = arr
         if not filled.all():  # pragma: no cover - every message lands in exactly one block
             raise self.error("internal error: messages lost while decoding")
-        position, velocity, effort = (np.full((total, len(names)), np.nan) if a is None else a
+        position, velocity, effort = (_missing(total, len(names)) if a is None else a
                                       for a in out)
         return JointStateColumns(tuple(names), stamps, log_times, position, velocity, effort,
                                  fast_messages=self.fast)

@@ -230,8 +230,20 @@ def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
     if require_commands and tau_cmd is None:
         raise LogFormatError(f"{source}: no commanded torques (expected effort[] on "
                              f"{cmd_topic!r} as JointState or Float64MultiArray)")
-    return JointLog(joint_names=names, t=t, q=q, qd=qd, tau_cmd=tau_cmd, q_cmd=q_cmd,
-                    t0_ns=int(stamps[0]))
+    return JointLog(joint_names=names, t=_handover(t), q=_handover(q), qd=_handover(qd),
+                    tau_cmd=_handover(tau_cmd), q_cmd=_handover(q_cmd), t0_ns=int(stamps[0]))
+
+
+def _handover(arr: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    """Freeze a column this reader owns so that JointLog adopts it instead of copying it (the
+    decoded position column often *is* q: copying it would hold the log twice at the peak)."""
+    if arr is None:
+        return None
+    arr = np.asarray(arr, dtype=np.float64)
+    if arr.base is not None:
+        arr = arr.copy()
+    arr.setflags(write=False)
+    return arr
 
 
 def read_joint_log(

@@ -23,6 +23,12 @@ CONTACT_KINDS = ("tip", "joint", "body")
 
 
 def _frozen(arr: Any, dtype: Any = float) -> NDArray[Any]:
+    """Read-only array of ``arr``: a copy, except that a read-only array of that dtype which owns
+    its memory is adopted as it is (the reader hands its decoded columns over, so a log is held
+    once; a view, or an array the caller can still write, is always copied)."""
+    if (isinstance(arr, np.ndarray) and arr.dtype == np.dtype(dtype) and arr.base is None
+            and not arr.flags.writeable):
+        return arr
     out = np.array(arr, dtype=dtype)
     out.setflags(write=False)
     return out

@@ -85,6 +85,7 @@ class _Scanner:
         self.schemas: dict[int, Any] = {}
         self.channels: dict[int, TopicStats] = {}
         self.decoders: dict[int, TopicDecoder | None] = {}
+        self.counts: dict[int, int] = {}  # messages per channel id, from the summary if any
 
     # -------------------------------------------------------------- records
     def add_schema(self, schema: Any) -> None:
@@ -107,6 +108,8 @@ class _Scanner:
             info = ChannelInfo(channel.id, channel.topic, channel.message_encoding, name,
                                schema.encoding if schema else "", schema.data if schema else b"")
             decoder = decoder_class(info, self.scan.source)
+            if self.counts.get(channel.id):
+                decoder.expect(self.counts[channel.id])
         self.decoders[channel.id] = decoder
 
     def add_messages(self, buf: NDArray[np.uint8], starts: NDArray[np.int64],
@@ -225,6 +228,21 @@ _SKIP = {0x07, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F}
 offsets, data end (parsing message indexes in Python would cost more than the decoding)."""
 
 
+def _summary_counts(handle: Any) -> dict[int, int]:
+    """Messages per channel id from the file's summary statistics, or {} (no summary, a file
+    cut short, a damaged footer).  Only a sizing hint for the decoders: the records are still
+    read sequentially and counted."""
+    from mcap.reader import SeekingReader
+
+    try:
+        summary = SeekingReader(handle, validate_crcs=False).get_summary()
+    except Exception:
+        return {}
+    if summary is None or summary.statistics is None:
+        return {}
+    return {int(k): int(v) for k, v in summary.statistics.channel_message_counts.items()}
+
+
 def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
     """Read ``path`` once; decode the topics for which ``wanted(topic, schema_name)`` is true
     (default: every topic with a registered decoder).
@@ -266,6 +284,7 @@ def scan_mcap(path: str | Path, wanted: Any = None) -> LogScan:
                0x09: Attachment, 0x0C: Metadata}
     with path.open("rb") as handle:
         size = os.fstat(handle.fileno()).st_size
+        scanner.counts = _summary_counts(handle)
         handle.seek(len(MCAP_MAGIC))
         while True:
             head = handle.read(9)
