@@ -320,33 +320,36 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
             seg_rows[np.isin(group, group[rows])] = len(all_fits)
             all_fits.append(fit_x)
     swap = np.isin(group, group[swap])
-    if extra:
-        joined = f", {len(extra) - (len(all_fits) - len(seg.primitives))} of them the same " \
-            "surface as a primitive already found" if merged else ""
-        messages.append(f"{len(extra)} primitive(s) found among unexplained contacts by trying "
-                        f"uncertain ones as the other class ({int(np.sum(swap))} contacts "
-                        f"switched between tip and link{joined})")
     # a link contact whose least clearance lies at the link's outer end touched with the
-    # sphere there: it is a tip contact (tip radius, not link radius) whatever its label
+    # sphere there: it is a tip contact (tip radius, not link radius) whatever its label - on
+    # every primitive, those the second look found included (its switched contacts too)
+    used = table.used_as_tip ^ swap
     flip = np.zeros(len(table), dtype=bool)
-    for k, fit in enumerate(seg.primitives):
-        links = seg.members(k)
-        links = links[links >= data.n_tip]
-        if fit.primitive is None or links.size == 0:
+    for k, fit in enumerate(all_fits):
+        rows = reps[(seg_rows[reps] == k) & ~used[reps]]
+        if fit.primitive is None or rows.size == 0:
             continue
-        li = links - data.n_tip
-        _, t = fit.primitive.segment_signed_distance(data.link_a[li], data.link_b[li],
+        _, t = fit.primitive.segment_signed_distance(table.seg_a[rows], table.seg_b[rows],
                                                      free_side=fit.free_side)
-        rows = order[links[np.asarray(t) >= 1.0 - 1e-6]]
+        rows = rows[np.asarray(t) >= 1.0 - 1e-6]
         flip[rows[table.tip_radius[rows] != table.link_radius[rows]]] = True
-    flip = np.isin(group, group[flip]) & ~table.used_as_tip
+    flip = np.isin(group, group[flip]) & ~used
+    if extra:
+        switched = int(np.sum(swap & ~flip))  # a switched contact flipped back keeps its class
+        detail = [f"{switched} contacts switched between tip and link"] if switched else []
+        if merged:
+            detail.append(f"{len(extra) - (len(all_fits) - len(seg.primitives))} of them the "
+                          "same surface as a primitive already found")
+        messages.append(f"{len(extra)} primitive(s) found among unexplained contacts by trying "
+                        "uncertain ones as the other class"
+                        + (f" ({', '.join(detail)})" if detail else ""))
     refit_needed: set[int] = set(range(len(seg.primitives), len(all_fits))) | merged
     if np.any(flip):
         refit_needed |= set(seg_rows[flip].tolist())
         messages.append(f"{int(np.sum(flip))} link contacts touching with the link's outer "
                         "end used as tip contacts")
     if np.any(flip | swap):
-        table = dataclasses.replace(table, used_as_tip=table.used_as_tip ^ (flip | swap))
+        table = dataclasses.replace(table, used_as_tip=used ^ flip)
         data, order = fit_data_from_table(table, free_points, rows=reps)
     assign_fit = seg_rows[order]  # primitive of each fit contact, in the (new) fit order
     assignment = np.full(len(table), -1, dtype=np.int64)
