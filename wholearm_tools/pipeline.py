@@ -462,7 +462,9 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     as such; it costs nothing).  Returns the primitives with the table rows each explains
     (a row explained in both versions takes the one with the smaller residual) and those
     rows' fit data in the version it explains, and, per table row, whether it is now used as
-    the other class.
+    the other class.  A primitive whose support spans less than B / 2 (the smallest radius a
+    primitive may have) is dropped: with classes switched, a cluster of repeated touches at
+    one spot fits a primitive through wherever the other class puts them.
     """
     from wholearm_tools.fit import FitData, segment
     from wholearm_tools.fit.core import residuals
@@ -503,11 +505,25 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
         if len(keep) < MODELS[fit.kind].dof + 2:
             continue
         idx = np.array(sorted(keep), dtype=np.int64)
-        taken[idx] = True
         versions = np.array([keep[row] for row in idx.tolist()])
+        sub = data.take(versions)
+        touch = _support_points(fit, sub, np.arange(sub.n_contacts), sub.n_tip)
+        if _span(touch) < 0.5 * float(B):
+            # a switched class makes a cluster of repeated touches fit anything through
+            # wherever the other class puts them: the support must span at least B / 2, the
+            # smallest radius a primitive may have (``min_radius``), as a surface patch would
+            continue
+        taken[idx] = True
         swap[idx] = fit_tip[versions] != table.used_as_tip[idx]
-        out.append((fit, idx, data.take(versions)))
+        out.append((fit, idx, sub))
     return out, swap
+
+
+def _span(points: NDArray) -> float:
+    """Largest distance between two of ``points`` (0 for fewer than two)."""
+    from scipy.spatial.distance import pdist
+
+    return float(pdist(np.asarray(points, dtype=float)).max()) if len(points) > 1 else 0.0
 
 
 def _with_contact_hints(table: ContactTable, free_points: NDArray | None) -> NDArray | None:
