@@ -146,7 +146,7 @@ class _Direct:
         self.filled = np.zeros(count, dtype=bool)
 
     def accepts(self, names: tuple[str, ...], fields: list[NDArray], index: NDArray) -> bool:
-        return (names == self.names and int(index.max()) < self.count
+        return (names == self.names and index.shape[0] > 0 and int(index.max()) < self.count
                 and [f.shape[1] > 0 for f in fields] == self.carried)
 
     def write(self, index: NDArray[np.int64], stamp: NDArray, log_time: NDArray,
