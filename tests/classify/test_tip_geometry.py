@@ -167,3 +167,28 @@ def test_held_joint_torque_narrows_where_the_contact_can_be():
     assert plain.p_tip[0] < 0.3
     assert informed.p_tip[0] > 0.9
     assert informed.meta["torque_informed"] == 1
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_first_within_is_the_earliest_swept_cell_in_the_ball(dim):
+    """Against brute force over every cell, for points inside, at the edge of and outside the
+    grid and radii of a fraction of a cell to several cells."""
+    from wholearm_tools.classify.swept import SweptMap
+
+    rng = np.random.default_rng(dim)
+    shape = (23, 19, 17)[:dim]
+    first = rng.integers(0, 500, size=shape).astype(np.int32)
+    first[rng.random(shape) < 0.7] = NEVER
+    res = 0.01
+    origin = np.array([-0.1, 0.05, 0.2][:dim])
+    smap = SweptMap(origin=origin, resolution=res, first=first, n_samples=500)
+    lo, hi = origin - 3 * res, origin + (np.array(shape) + 2) * res
+    points = rng.uniform(lo, hi, size=(400, dim))
+    centres = origin + np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"),
+                                -1).reshape(-1, dim) * res
+    values = first.reshape(-1).astype(np.int64)
+    for radius in (0.004, 0.013, 0.035):
+        got = smap.first_within(points, radius)
+        d = np.linalg.norm(points[:, None] - centres[None], axis=-1)
+        expect = np.where(d <= radius, values[None], NEVER).min(axis=1)
+        np.testing.assert_array_equal(got, expect)

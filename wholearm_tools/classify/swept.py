@@ -117,14 +117,29 @@ class SweptMap:
         lim = radius / self.resolution + 0.5 * np.sqrt(self.dim)
         offs = offs[np.sum(offs**2, axis=1) <= lim**2]
         base = self.cells(p)
-        chunk = max(1, 2_000_000 // offs.shape[0])
+        res = self.resolution
+        shape = np.array(self.first.shape)
+        strides = np.array([int(np.prod(shape[i + 1:])) for i in range(self.dim)])
+        flat = self.first.reshape(-1)
+        ovec = offs * res
+        o2 = np.sum(ovec**2, axis=1)
+        flat_offs = offs @ strides
+        # points whose whole ball of cells lies in the grid: flat indices, no bounds checks
+        inside = np.all((base - reach >= 0) & (base + reach < shape), axis=1)
+        chunk = max(1, 200_000 // offs.shape[0])  # (chunk, K) blocks stay in cache
         for s in range(0, p.shape[0], chunk):
-            c = base[s:s + chunk, None, :] + offs[None]
-            centre = self.origin + c * self.resolution
-            near = np.sum((centre - p[s:s + chunk, None, :]) ** 2, axis=-1) <= radius**2
-            f = self._lookup(c)
-            f[~near] = NEVER
-            out[s:s + chunk] = f.min(axis=1)
+            sl = slice(s, s + chunk)
+            # |centre - p|^2 with centre = origin + (base + off) * res, expanded around the
+            # point's own cell: |d0|^2 + 2 d0.o + |o|^2 (one matrix product per block)
+            d0 = self.origin + base[sl] * res - p[sl]
+            dist2 = np.sum(d0**2, axis=1)[:, None] + 2.0 * (d0 @ ovec.T) + o2[None]
+            ok = inside[sl]
+            f = np.empty(dist2.shape, dtype=np.int64)
+            f[ok] = flat[(base[sl][ok] @ strides)[:, None] + flat_offs[None]]
+            if not ok.all():
+                f[~ok] = self._lookup(base[sl][~ok][:, None, :] + offs[None])
+            f[dist2 > radius**2] = NEVER
+            out[sl] = f.min(axis=1)
         return out.reshape(batch)
 
 
