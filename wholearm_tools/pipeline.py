@@ -380,8 +380,14 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                             "contacts do not determine every parameter at "
                             f"{REPORT_ID_NOISE:g} of the scene size")
             continue
-        pid = len(primitives)
         rows = order[members]
+        if fit.kind == "plane" and _links_lie_flat(fit.primitive, table.seg_a[rows],
+                                                   table.seg_b[rows]):
+            messages.append(f"a plane on {len(members)} contacts not reported: the contacting "
+                            "links lie flat in it at most of them, so it is the plane they "
+                            "moved in, offset by their radius, not a surface they show")
+            continue
+        pid = len(primitives)
         # duplicates follow their representative
         dup = np.isin(group, group[rows])
         res_of_group = dict(zip(group[rows].tolist(), fit.residuals.tolist(), strict=True))
@@ -517,6 +523,26 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
         swap[idx] = fit_tip[versions] != table.used_as_tip[idx]
         out.append((fit, idx, sub))
     return out, swap
+
+
+#: a link lies flat against a plane when its two ends are at the same distance from it to
+#: within this angle (the sine of it, per unit link length)
+FLAT_LINK_SIN = float(np.sin(np.radians(2.0)))
+
+
+def _links_lie_flat(plane: Any, seg_a: NDArray, seg_b: NDArray) -> bool:
+    """Whether more than half of the contacting links (segments ``seg_a -> seg_b``) lie flat
+    against ``plane``.
+
+    An arm whose joint stays put (a base yaw held while shoulder and elbow move) keeps every
+    link in one plane; any contacts it makes, tips or link sides, fit that plane offset by a
+    radius as closely as the encoder allows. A real surface is met by links at an angle, or by
+    a link lying flat now and then; most of them flat is the arm's own plane of motion."""
+    a = np.asarray(seg_a, dtype=float)
+    b = np.asarray(seg_b, dtype=float)
+    length = np.maximum(np.linalg.norm(b - a, axis=1), 1e-12)
+    tilt = np.abs(plane.signed_distance(b) - plane.signed_distance(a)) / length
+    return bool(2 * np.count_nonzero(tilt < FLAT_LINK_SIN) > len(a))
 
 
 def _span(points: NDArray) -> float:
