@@ -26,11 +26,14 @@ from typing import Any
 import click
 
 from cli.options import (
+    B_option,
+    causal_option,
     check_output_file,
     command_topic_option,
     joint_topic_option,
     json_option,
     overwrite_option,
+    robot_option,
 )
 
 log = logging.getLogger(__name__)
@@ -77,16 +80,12 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
 
 @click.command("contacts")
 @click.argument("run", type=click.Path(dir_okay=False, exists=True, path_type=Path))
-@click.option("--B", "B", type=float, required=True,
-              help="Smallest expected surface curvature radius [m].")
-@click.option("--causal", is_flag=True,
-              help="Classify with the map as seen at each contact (default: whole run).")
+@B_option(default=None)
+@causal_option
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the contacts as CSV, or Parquet for a .parquet name (default: a "
                    "table on stdout).")
-@click.option("--robot", "robot_file", type=click.Path(dir_okay=False, exists=True,
-                                                       path_type=Path), default=None,
-              help="URDF file (default: the log's /robot_description).")
+@robot_option
 @joint_topic_option
 @command_topic_option
 @json_option
@@ -98,8 +97,6 @@ def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: 
     from wholearm_tools._tables import write_rows
     from wholearm_tools.logs import read_run
 
-    if not B > 0:
-        raise click.BadParameter(f"must be a positive length in metres, got {B}", param_hint="--B")
     if output is not None:
         check_output_file(output, overwrite)
     data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,

@@ -32,11 +32,12 @@ def progress_enabled() -> bool:
 
 
 def B_option(default: float | None = 0.02):  # noqa: N802 - B is the paper's name
-    """``--B``: smallest expected surface curvature radius [m]."""
+    """``--B``: smallest expected surface curvature radius [m]; required when ``default`` is
+    None (click treats an explicit ``default=None`` as a value, so it is not passed)."""
+    given = {"default": default, "show_default": True} if default is not None else {}
     return click.option(
-        "--B", "B", type=click.FloatRange(min=0.0, min_open=True), default=default,
-        required=default is None, show_default=default is not None,
-        help="Smallest expected surface curvature radius B [m].")
+        "--B", "B", type=click.FloatRange(min=0.0, min_open=True), required=default is None,
+        help="Smallest expected surface curvature radius B [m].", **given)
 
 
 robot_option = click.option(

@@ -13,24 +13,23 @@ from pathlib import Path
 import click
 
 from cli.options import (
+    B_option,
     check_output_file,
     command_topic_option,
     joint_topic_option,
     overwrite_option,
+    robot_option,
 )
 
 
 @click.command("plot-ptip")
 @click.argument("run", type=click.Path(dir_okay=False, exists=True, path_type=Path))
-@click.option("--B", "B", type=float, required=True,
-              help="Smallest expected surface curvature radius [m].")
+@B_option(default=None)
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Image file (PNG, PDF or SVG by extension).")
 @click.option("--steps", type=click.IntRange(2, 2000), default=200, show_default=True,
               help="Number of replay times.")
-@click.option("--robot", "robot_file", type=click.Path(dir_okay=False, exists=True,
-                                                       path_type=Path), default=None,
-              help="URDF file (default: the log's /robot_description).")
+@robot_option
 @joint_topic_option
 @command_topic_option
 @overwrite_option
@@ -44,8 +43,6 @@ def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | No
     from wholearm_tools.contacts import detect_contacts, match_truth
     from wholearm_tools.logs import read_run
 
-    if not B > 0:
-        raise click.BadParameter(f"must be a positive length in metres, got {B}", param_hint="--B")
     check_output_file(output, overwrite)
     data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,
                     require_commands=True)

@@ -47,6 +47,11 @@ def csv_text(fields: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
     return buf.getvalue()
 
 
+def csv_rows(text: str) -> list[dict[str, str]]:
+    """The rows of CSV ``text`` (header line first), every cell as text."""
+    return list(csv.DictReader(io.StringIO(text)))
+
+
 def read_rows(path: str | Path) -> list[dict[str, str]]:
     """Rows of a CSV or Parquet table, every cell as text (``""`` where empty)."""
     path = Path(path)
@@ -55,7 +60,7 @@ def read_rows(path: str | Path) -> list[dict[str, str]]:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-        return list(csv.DictReader(io.StringIO(text)))
+        return csv_rows(text)
     import pyarrow as pa
     import pyarrow.parquet as pq
 

@@ -17,8 +17,6 @@ an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -160,7 +158,9 @@ class ContactTable:
 
     @classmethod
     def from_csv(cls, text: str, source: str = "contacts.csv") -> ContactTable:
-        return cls.from_rows(list(csv.DictReader(io.StringIO(text))), source)
+        from wholearm_tools._tables import csv_rows
+
+        return cls.from_rows(csv_rows(text), source)
 
     @classmethod
     def from_rows(cls, rows: list[dict[str, str]], source: str = "contacts.csv"

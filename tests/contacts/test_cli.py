@@ -159,3 +159,14 @@ def test_existing_output_is_refused(mcap: Path, tmp_path: Path) -> None:
     assert res.exit_code == 1
     assert "--overwrite" in res.output
     assert out.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
+@pytest.mark.parametrize("b_args", [[], ["--B", "-1"], ["--B", "0"]])
+def test_a_missing_or_non_positive_b_is_a_usage_error(command: str, b_args: list[str],
+                                                      mcap: Path, tmp_path: Path) -> None:
+    res = run(command, str(mcap), *b_args, "-o", str(tmp_path / "out.png"))
+    assert res.exit_code == 2
+    assert "--B" in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "out.png").exists()
