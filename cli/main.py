@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import logging
 import sys
+import warnings
 
 import click
 
@@ -50,7 +51,14 @@ def cli(verbose: int, quiet: bool) -> None:
                                          logging.INFO if verbose else logging.WARNING)
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr,
                         force=True)
-    logging.captureWarnings(True)
+    warnings.showwarning = _log_warning
+
+
+def _log_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                 file: object = None, line: str | None = None) -> None:
+    """Warnings go to the log as one line, their message alone: the library's warnings name
+    the file and the problem, and the source line that raised one means nothing to a user."""
+    logging.getLogger("py.warnings").warning("%s", message)
 
 
 for _name in COMMANDS:

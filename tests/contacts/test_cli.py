@@ -170,3 +170,17 @@ def test_a_missing_or_non_positive_b_is_a_usage_error(command: str, b_args: list
     assert "--B" in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "out.png").exists()
+
+
+def test_a_truncated_log_is_read_with_a_one_line_warning(mcap: Path, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size * 3 // 5])
+    res = run("contacts", str(cut), "--B", "0.02", "--json")
+    assert res.exit_code == 0, res.output
+    warned = [line for line in res.stderr.splitlines() if line.strip()]
+    assert len(warned) == 1, res.stderr
+    assert warned[0].startswith("WARNING: ")
+    assert str(cut) in warned[0]
+    assert "truncated" in warned[0]
+    assert ".py:" not in res.stderr  # no source location of the library
+    assert json.loads(res.stdout)["contacts"]
