@@ -260,7 +260,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                meta: dict[str, Any] | None, noise_floor: float, merge_duplicates: bool,
                sweep: Any, base: NDArray | None, pool: Executor | None,
                ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
-    from wholearm_tools.fit import fit_primitive, segment
+    from wholearm_tools.fit import crossing, fit_primitive, segment
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.mesh import support_extent
 
@@ -387,13 +387,22 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                             "links lie flat in it at most of them, so it is the plane they "
                             "moved in, offset by their radius, not a surface they show")
             continue
+        support = _support_points(fit, data, members, n_tip)
+        if sweep is not None and fit.kind in crossing.CHECKED:
+            feet = crossing.cut_feet(fit.primitive, fit.free_side, sweep,
+                                     tol=max(5.0 * seg.noise, 2e-3))
+            why = crossing.crossed_between(fit.kind, fit.params, support, feet,
+                                           need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
+                                           min_cuts=CROSSING_MIN_CUTS)
+            if why:
+                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: {why}")
+                continue
         pid = len(primitives)
         # duplicates follow their representative
         dup = np.isin(group, group[rows])
         res_of_group = dict(zip(group[rows].tolist(), fit.residuals.tolist(), strict=True))
         assignment[dup] = pid
         residual[dup] = [res_of_group[g] for g in group[dup].tolist()]
-        support = _support_points(fit, data, members, n_tip)
         extent = support_extent(fit.kind, fit.params, support)
         surfaces.append(MapSurface(fit.primitive, float(fit.free_side),
                                    max(float(fit.rms_residual), float(seg.noise), noise_floor),
@@ -524,6 +533,10 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
         out.append((fit, idx, sub))
     return out, swap
 
+
+#: cuts of the robot's sweep inside a line's, circle's or plane's support that are ignored
+#: (fewer than this): see :mod:`wholearm_tools.fit.crossing`
+CROSSING_MIN_CUTS = 3
 
 #: a link lies flat against a plane when its two ends are at the same distance from it to
 #: within this angle (the sine of it, per unit link length)

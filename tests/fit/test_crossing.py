@@ -1,0 +1,104 @@
+"""The robot's sweep crossing a fitted line, circle or plane between its contacts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wholearm_tools.fit.crossing import crossed_between, cut_feet
+from wholearm_tools.fit.data import Sweep
+from wholearm_tools.geometry import Circle2D, Line2D, Plane
+
+
+def _sticks(xs, y0: float, y1: float, r: float = 0.01) -> Sweep:
+    """Vertical 2-D capsules at ``xs`` from ``y0`` to ``y1``."""
+    xs = np.asarray(xs, dtype=float)
+    return Sweep(np.c_[xs, np.full(len(xs), y0)], np.c_[xs, np.full(len(xs), y1)],
+                 np.full(len(xs), r))
+
+
+LINE = Line2D([0.0, 0.0], [1.0, 0.0])  # free side +1: y > 0
+
+
+def _check(kind, params, support, sweep, prim, need=4, min_span=0.01):
+    feet = cut_feet(prim, 1.0, sweep, tol=2e-3)
+    return crossed_between(kind, params, support, feet, need=need, min_span=min_span,
+                           min_cuts=3)
+
+
+def test_a_line_held_up_by_two_far_clusters_and_crossed_between_them_goes():
+    """Three touches within 2 mm and one 0.5 m away determine a line exactly; the arm swept
+    across it in between: no surface is there."""
+    support = np.array([[0.0, 0.0], [0.001, 0.0], [0.002, 0.0], [0.5, 0.0]])
+    params = {"point": [0.0, 0.0], "direction": [1.0, 0.0]}
+    crossing = _sticks(np.linspace(0.1, 0.4, 20), -0.1, 0.1)
+    why = _check("line", params, support, crossing, LINE)
+    assert why is not None
+    assert "20 times between its contacts" in why
+    assert "at most 3 over 2 mm" in why
+    # the same contacts with the arm only on the free side: kept
+    assert _check("line", params, support, _sticks(np.linspace(0.1, 0.4, 20), 0.05, 0.2),
+                  LINE) is None
+    # crossings beyond the last contact (past a wall's corner) do not count
+    assert _check("line", params, support, _sticks(np.linspace(0.6, 0.9, 20), -0.1, 0.1),
+                  LINE) is None
+
+
+def test_a_wall_with_a_doorway_the_arm_went_through_stays():
+    """Five contacts on either side of a 0.2 m gap that the arm passed through: either side
+    determines the line by itself."""
+    support = np.c_[np.r_[np.linspace(-0.3, -0.1, 5), np.linspace(0.1, 0.3, 5)], np.zeros(10)]
+    params = {"point": [0.0, 0.0], "direction": [1.0, 0.0]}
+    door = _sticks(np.linspace(-0.05, 0.05, 30), -0.1, 0.1)
+    assert _check("line", params, support, door, LINE) is None
+    # with only three contacts on each side neither stretch holds a fit's worth (need 4)
+    few = support[[0, 2, 4, 5, 7, 9]]
+    assert _check("line", params, few, door, LINE) is not None
+
+
+def test_fewer_cuts_than_the_minimum_are_ignored():
+    support = np.array([[0.0, 0.0], [0.001, 0.0], [0.002, 0.0], [0.5, 0.0]])
+    params = {"point": [0.0, 0.0], "direction": [1.0, 0.0]}
+    assert _check("line", params, support, _sticks([0.2, 0.3], -0.1, 0.1), LINE) is None
+
+
+def test_a_circle_is_checked_over_the_arc_its_contacts_cover_only():
+    circle = Circle2D([0.0, 0.0], 0.1)
+    params = {"center": [0.0, 0.0], "radius": 0.1}
+    ang = np.radians([0.0, 1.0, 2.0, 90.0])  # a cluster at 0 deg, one contact at 90 deg
+    support = 0.1 * np.c_[np.cos(ang), np.sin(ang)]
+    # radial capsules reaching into the circle at 30-60 deg (inside the covered arc)
+    a = np.radians(np.linspace(30.0, 60.0, 10))
+    into = Sweep(0.2 * np.c_[np.cos(a), np.sin(a)], 0.05 * np.c_[np.cos(a), np.sin(a)],
+                 np.full(10, 0.01))
+    assert _check("circle", params, support, into, circle) is not None
+    # the same at 180-210 deg, outside the covered arc: the circle stands
+    b = a + np.pi
+    away = Sweep(0.2 * np.c_[np.cos(b), np.sin(b)], 0.05 * np.c_[np.cos(b), np.sin(b)],
+                 np.full(10, 0.01))
+    assert _check("circle", params, support, away, circle) is None
+
+
+def test_a_plane_crossed_inside_its_contacts_hull_goes():
+    """Tips at one height around a bore fit a horizontal plane; the arm moved up and down
+    inside the ring."""
+    plane = Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    params = {"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}
+    ang = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+    support = np.c_[0.15 * np.cos(ang), 0.15 * np.sin(ang), np.zeros(8)]
+    xy = np.random.default_rng(0).uniform(-0.05, 0.05, size=(12, 2))
+    inside = Sweep(np.c_[xy, np.full(12, -0.2)], np.c_[xy, np.full(12, 0.2)], np.full(12, 0.02))
+    why = _check("plane", params, support, inside, plane)
+    assert why is not None
+    assert "12 times inside" in why
+    outside = Sweep([*inside.a, 0.5, 0.0, 0.0], [*inside.b, 0.5, 0.0, 0.0], inside.radius)
+    assert _check("plane", params, support, outside, plane) is None
+    # collinear support spans no region
+    assert _check("plane", params, support[[0, 4]], inside, plane) is None
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder"])
+def test_other_types_are_not_checked(kind):
+    """A bore's wall is crossed through a junction's window, inside its contacts."""
+    assert crossed_between(kind, {}, np.zeros((5, 3)), np.zeros((9, 3)), need=5,
+                           min_span=0.01, min_cuts=3) is None

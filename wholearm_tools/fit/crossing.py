@@ -1,0 +1,117 @@
+"""Whether the robot's own motion crossed a fitted surface *between* its contacts.
+
+:func:`~wholearm_tools.fit.core.sweep_violation` looks next to each contact (within
+``sweep_near``), which catches a surface pushed a few millimetres into the robot's path.  It
+misses a primitive held up by two distant clusters of contacts: repeated touches at one spot
+and one contact half a metre away fit a line exactly, and the arm sweeps back and forth across
+that line in between, far from either cluster.  A surface the robot touched cannot be passed
+through where its contacts say it is, so this module finds the cuts that lie *within* the
+support:
+
+* a curve (2-D line or circle): the cuts split the support, ordered along the curve, into
+  pieces; the primitive stands only if one uncut piece would determine it by itself (enough
+  contacts over enough length).  A wall with a doorway the arm went through keeps its contacts
+  on either side as long as one side holds a fit's worth of them;
+* a plane: cuts inside the convex hull of its support points (in the plane) rule it out.  A
+  flat wall with an opening the arm passed through, touched all round the opening, would go
+  too: not seen in the bundled scenarios, documented in docs/method.md.
+
+Other types (sphere, cylinder, cone, torus) are not checked here: a bore's wall is crossed
+through a junction's window, inside the region its contacts surround.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wholearm_tools.fit.data import Sweep
+
+FloatArray = NDArray[np.float64]
+
+#: primitive types :func:`crossed_between` checks
+CHECKED = ("line", "circle", "plane")
+
+
+def cut_feet(primitive: Any, free_side: float, sweep: Sweep, tol: float) -> FloatArray:
+    """Feet on the surface (closest points) of the sweep capsules that penetrate it deeper
+    than ``tol``, shape ``(k, d)``."""
+    if len(sweep) == 0:
+        return np.zeros((0, sweep.dim))
+    clear, t = primitive.segment_signed_distance(sweep.a, sweep.b, free_side=float(free_side))
+    deep = np.flatnonzero(np.asarray(clear) - sweep.radius < -tol)
+    if deep.size == 0:
+        return np.zeros((0, sweep.dim))
+    x = sweep.a[deep] + np.asarray(t)[deep, None] * (sweep.b[deep] - sweep.a[deep])
+    return np.asarray(primitive.closest_point(x), dtype=float).reshape(-1, sweep.dim)
+
+
+def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray
+           ) -> tuple[FloatArray, FloatArray]:
+    """Curve coordinates [m] of the support points and of the cut feet inside the support's
+    extent (a circle's coordinate starts after its largest gap between support points)."""
+    if kind == "line":
+        d = np.asarray(params["direction"], dtype=float)
+        d = d / np.linalg.norm(d)
+        s, f = support @ d, feet @ d
+        return s, f[(f > s.min()) & (f < s.max())]
+    c = np.asarray(params["center"], dtype=float)
+    r = float(np.asarray(params["radius"], dtype=float))
+    ang = np.mod(np.arctan2(support[:, 1] - c[1], support[:, 0] - c[0]), 2 * np.pi)
+    order = np.sort(ang)
+    gaps = np.diff(np.concatenate([order, order[:1] + 2 * np.pi]))
+    start = order[(int(np.argmax(gaps)) + 1) % len(order)]
+    span = 2 * np.pi - float(gaps.max())
+    s = np.mod(ang - start, 2 * np.pi)
+    f = np.mod(np.arctan2(feet[:, 1] - c[1], feet[:, 0] - c[0]) - start, 2 * np.pi)
+    return r * s, r * f[f < span]
+
+
+def crossed_between(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray,
+                    *, need: int, min_span: float, min_cuts: int) -> str | None:
+    """Why the cuts ``feet`` rule the primitive out, or None when they do not.
+
+    ``support``: the primitive's support points on its surface ``(S, d)``; ``need`` and
+    ``min_span``: the contacts and the length one uncut piece of a curve's support needs;
+    ``min_cuts``: fewer cuts inside the support than this are ignored (a capsule grazing the
+    surface within the tolerance on a noisy log).
+    """
+    support = np.asarray(support, dtype=float)
+    feet = np.asarray(feet, dtype=float)
+    if kind not in CHECKED or len(support) < 2 or len(feet) == 0:
+        return None
+    if kind == "plane":
+        from scipy.spatial import Delaunay, QhullError
+
+        n = np.asarray(params["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
+        e1 = np.eye(3)[int(np.argmin(np.abs(n)))]
+        e1 = e1 - (e1 @ n) * n
+        e1 = e1 / np.linalg.norm(e1)
+        e2 = np.cross(n, e1)
+        basis = np.stack([e1, e2], axis=1)
+        try:
+            hull = Delaunay(support @ basis)
+        except QhullError:  # support points on a line: no region between them
+            return None
+        inside = int(np.count_nonzero(hull.find_simplex(feet @ basis) >= 0))
+        if inside < min_cuts:
+            return None
+        return f"the robot passed through it {inside} times inside the region its contacts span"
+    s, cuts = _along(kind, params, support, feet)
+    if len(cuts) < min_cuts:
+        return None
+    cuts = np.sort(cuts)
+    piece = np.searchsorted(cuts, s)            # which gap between cuts each contact lies in
+    best_n, best_span = 0, 0.0
+    for k in np.unique(piece):
+        sk = s[piece == k]
+        if len(sk) > best_n or (len(sk) == best_n and np.ptp(sk) > best_span):
+            best_n, best_span = len(sk), float(np.ptp(sk))
+    if best_n >= need and best_span >= min_span:
+        return None
+    return (f"the robot passed through it {len(cuts)} times between its contacts, and no "
+            f"uncut stretch holds enough of them (at most {best_n} over "
+            f"{1e3 * best_span:.0f} mm)")
