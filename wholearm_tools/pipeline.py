@@ -341,7 +341,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
             detail.append(f"{len(extra) - (len(all_fits) - len(seg.primitives))} of them the "
                           "same surface as a primitive already found")
         messages.append(f"{len(extra)} primitive(s) found among unexplained contacts by trying "
-                        "uncertain ones as the other class"
+                        "ambiguous ones as the other class"
                         + (f" ({', '.join(detail)})" if detail else ""))
     refit_needed: set[int] = set(range(len(seg.primitives), len(all_fits))) | merged
     if np.any(flip):
@@ -459,18 +459,13 @@ def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
 #: a right post too.
 REPORT_ID_NOISE = 5e-4
 
-#: tip probabilities between these bounds make a contact's class uncertain enough for the
-#: second look of :func:`_other_interpretation`
-UNCERTAIN_P_TIP = (0.1, 0.9)
-
-
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
                           noise_floor: float, B: float, sweep: Any = None,
                           base: NDArray | None = None, pool: Executor | None = None,
                           ) -> tuple[list[tuple[Any, NDArray, Any]], NDArray]:
-    """Primitives among the contacts fit-and-grow left unexplained, each uncertain one
-    (``p_tip`` within :data:`UNCERTAIN_P_TIP`) offered both as a tip and as a link contact.
+    """Primitives among the contacts fit-and-grow left unexplained, each one eq. (2) left
+    ambiguous offered both as a tip and as a link contact.
 
     A misclassified contact fits no surface as labelled; offered both ways, a primitive
     explains the right version and leaves the other unexplained (description length counts it
@@ -488,8 +483,10 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
 
     swap = np.zeros(len(table), dtype=bool)
     left = reps[seg_rows[reps] < 0]
-    p = table.p_tip[left]
-    unsure = left[(p > UNCERTAIN_P_TIP[0]) & (p < UNCERTAIN_P_TIP[1])]
+    # only the contacts eq. (2) left ambiguous: a confident label switched takes a cluster of
+    # touches at one spot wherever the other class puts it (five link-body touches of a post,
+    # P_T 0.15-0.18, tried as joint-sphere contacts spread 5 cm along a line)
+    unsure = left[table.label[left] == "ambiguous"]
     least = min(MODELS[k].dof for k in kinds) + 2
     if len(left) < least or unsure.size == 0:
         return [], swap
