@@ -350,3 +350,20 @@ def test_the_second_look_switches_only_ambiguous_contacts():
         assert a.type_correct, a.kind
         assert a.surface_rms < 1e-3, (a.kind, a.surface_rms)
     assert ev.classification_map.class_accuracy >= ev.classification.class_accuracy
+
+
+def test_one_wall_is_one_line_once_its_outer_end_contacts_are_refitted_as_tips():
+    """lab_circle (seed 0, 120 s): eleven link contacts on the left wall touch with the last
+    link's outer end. Fit-and-grow fitted them at the link radius, 3 mm off the wall's other
+    contacts, so the wall came out as two lines; refitted at the tip radius they coincide,
+    and the map has one line per wall."""
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.report.metrics import evaluate
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    rec = reconstruct(load_scenario("lab_circle").simulate(seed=0).run, B=0.02)
+    ev = evaluate(rec)
+    assert sorted(a.kind for a in ev.primitives) == ["circle", "line", "line"]
+    assert all(a.type_correct for a in ev.primitives)
+    assert len({a.truth_id for a in ev.primitives}) == 3
+    assert any("merged" in m for m in rec.messages)
