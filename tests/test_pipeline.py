@@ -367,3 +367,28 @@ def test_one_wall_is_one_line_once_its_outer_end_contacts_are_refitted_as_tips()
     assert all(a.type_correct for a in ev.primitives)
     assert len({a.truth_id for a in ev.primitives}) == 3
     assert any("merged" in m for m in rec.messages)
+
+
+def test_merge_coincident_joins_two_stretches_of_one_line_only():
+    from wholearm_tools.fit import FitData, fit_primitive
+    from wholearm_tools.pipeline import _merge_coincident
+
+    rng = np.random.default_rng(3)
+    x = np.r_[np.linspace(-0.3, -0.2, 6), np.linspace(0.1, 0.2, 6)]
+    y = 0.5 + rng.normal(0.0, 5e-6, x.size)  # noise below the sigma the merge is given
+    pts = np.c_[x, y]
+    data = FitData.create(pts, dim=2)
+    a, b = np.arange(6), np.arange(6, 12)
+    fa = fit_primitive("line", data.take(a), free_side=-1.0)
+    fb = fit_primitive("line", data.take(b), free_side=-1.0)
+    out, n = _merge_coincident([(fa, a), (fb, b)], data, sigma=1e-5)
+    assert n == 1
+    assert len(out) == 1
+    assert out[0][1].tolist() == list(range(12))
+    # the second stretch 3 mm higher: a parallel wall, not the same one
+    shifted = FitData.create(np.c_[x, y + np.r_[np.zeros(6), np.full(6, 0.003)]], dim=2)
+    fb = fit_primitive("line", shifted.take(b), free_side=-1.0)
+    fa = fit_primitive("line", shifted.take(a), free_side=-1.0)
+    out, n = _merge_coincident([(fa, a), (fb, b)], shifted, sigma=1e-5)
+    assert n == 0
+    assert len(out) == 2

@@ -466,6 +466,7 @@ def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
 #: a right post too.
 REPORT_ID_NOISE = 5e-4
 
+
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
                           free_points: NDArray | None, kinds: tuple[str, ...], sigma: float,
                           noise_floor: float, B: float, sweep: Any = None,
@@ -549,16 +550,18 @@ FLAT_LINK_SIN = float(np.sin(np.radians(2.0)))
 
 def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float,
                       k_sigma: float = 3.0) -> tuple[list[tuple[Any, NDArray]], int]:
-    """Merge primitives of one type and free side that one least-squares fit explains
-    together (every contact of both within ``k_sigma * sigma``; tried when one's contacts lie
-    within ten times that of the other): ``groups`` are (fit, fit-data indices) pairs;
-    returns the new list and how many merged away.
+    """Merge primitives of one type that one least-squares fit explains together (its
+    dof-corrected RMS residual over the contacts of both at most 1.5 ``sigma``, the chi-square
+    level; tried when one's contacts lie within ``10 k_sigma sigma`` of the other, on its free
+    side): ``groups`` are (fit, fit-data indices) pairs; returns the new list and how many
+    merged away.
 
     Fit-and-grow merges such pairs itself, but a primitive whose link contacts turn out to
     touch with the link's outer end is refitted afterwards at the tip radius, and only then
     lies on the other: on lab_circle (seed 0) one wall came out as two lines 3 mm apart
     (11 link contacts fitted at the link radius) that coincide once refitted."""
     from wholearm_tools.fit import fit_primitive, residuals
+    from wholearm_tools.fit.models import MODELS
 
     out = list(groups)
     merged = 0
@@ -567,14 +570,15 @@ def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float
         j = i + 1
         while j < len(out):
             (fi, mi), (fj, mj) = out[i], out[j]
-            if (fi.kind == fj.kind and fi.free_side == fj.free_side
-                    and np.all(np.abs(residuals(fi.kind, fi.params, data.take(mj),
-                                                fi.free_side)) <= 10.0 * k_sigma * sigma)):
-                # (the refit is tried only when j's contacts lie near i already)
+            # (signed residuals: j's contacts on the other side of i are far from it)
+            if fi.kind == fj.kind and np.all(np.abs(residuals(
+                    fi.kind, fi.params, data.take(mj), fi.free_side)) <= 10 * k_sigma * sigma):
                 union = np.union1d(mi, mj)
                 both = fit_primitive(fi.kind, data.take(union), free_side=fi.free_side,
                                      initial=dict(fi.params))
-                if both and np.all(np.abs(both.residuals) <= k_sigma * sigma):
+                r = np.asarray(both.residuals) if both else np.zeros(0)
+                dof = max(len(r) - MODELS[fi.kind].dof, 1)
+                if both and float(np.sqrt(np.sum(r * r) / dof)) <= 1.5 * sigma:
                     out[i] = (both, union)
                     del out[j]
                     merged += 1
