@@ -400,6 +400,13 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                             "contact (labelled link)")
             continue
         support = _support_points(fit, data, members, n_tip)
+        share = (None if sweep is None or base is None else crossing.escaped_share(
+            fit.kind, fit.primitive, fit.free_side, sweep, base, tol=max(5.0 * seg.noise, 2e-3)))
+        if share is not None and share > ENCLOSURE_MAX_ESCAPED:
+            messages.append(f"a {fit.kind} on {len(members)} contacts not reported: it would "
+                            f"enclose the robot's base, yet {100 * share:.0f} % of the robot's "
+                            "motion went through it")
+            continue
         if sweep is not None and fit.kind in crossing.CHECKED:
             feet = crossing.cut_feet(fit.primitive, fit.free_side, sweep,
                                      tol=max(5.0 * seg.noise, 2e-3))
@@ -543,6 +550,11 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
         out.append((fit, idx, sub))
     return out, swap
 
+
+#: largest share of the robot's sweep capsules that may cut through an enclosure holding its
+#: base (the rest of the motion went out through openings): see
+#: :func:`wholearm_tools.fit.crossing.escaped_share`
+ENCLOSURE_MAX_ESCAPED = 0.5
 
 #: cuts of the robot's sweep inside a line's, circle's or plane's support that are ignored
 #: (fewer than this): see :mod:`wholearm_tools.fit.crossing`

@@ -91,7 +91,8 @@ def test_a_plane_crossed_inside_its_contacts_hull_goes():
     why = _check("plane", params, support, inside, plane)
     assert why is not None
     assert "12 times inside" in why
-    outside = Sweep([*inside.a, 0.5, 0.0, 0.0], [*inside.b, 0.5, 0.0, 0.0], inside.radius)
+    shift = np.array([0.5, 0.0, 0.0])  # the same capsules beside the ring
+    outside = Sweep(inside.a + shift, inside.b + shift, inside.radius)
     assert _check("plane", params, support, outside, plane) is None
     # collinear support spans no region
     assert _check("plane", params, support[[0, 4]], inside, plane) is None
@@ -102,3 +103,19 @@ def test_other_types_are_not_checked(kind):
     """A bore's wall is crossed through a junction's window, inside its contacts."""
     assert crossed_between(kind, {}, np.zeros((5, 3)), np.zeros((9, 3)), need=5,
                            min_span=0.01, min_cuts=3) is None
+
+
+def test_an_enclosure_holding_the_base_must_hold_most_of_the_motion():
+    from wholearm_tools.fit.crossing import escaped_share
+
+    bore = Circle2D([0.0, 0.0], 0.3)  # free inside (-1), the base at the centre
+    ang = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
+    inside = Sweep(np.zeros((40, 2)), 0.2 * np.c_[np.cos(ang), np.sin(ang)], np.full(40, 0.01))
+    out = Sweep(np.zeros((40, 2)), 0.5 * np.c_[np.cos(ang), np.sin(ang)], np.full(40, 0.01))
+    base = np.zeros(2)
+    assert escaped_share("circle", bore, -1.0, inside, base, tol=2e-3) == 0.0
+    assert escaped_share("circle", bore, -1.0, out, base, tol=2e-3) == 1.0
+    # a post (free outside) or an enclosure the base stands outside of is not checked
+    assert escaped_share("circle", bore, 1.0, out, base, tol=2e-3) is None
+    assert escaped_share("circle", bore, -1.0, out, np.array([1.0, 0.0]), tol=2e-3) is None
+    assert escaped_share("line", LINE, -1.0, out, base, tol=2e-3) is None

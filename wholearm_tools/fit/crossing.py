@@ -48,6 +48,27 @@ def cut_feet(primitive: Any, free_side: float, sweep: Sweep, tol: float) -> Floa
     return np.asarray(primitive.closest_point(x), dtype=float).reshape(-1, sweep.dim)
 
 
+#: primitive types with an inside (negative signed distance) that can enclose the robot
+ENCLOSURES = ("circle", "sphere", "cylinder")
+
+
+def escaped_share(kind: str, primitive: Any, free_side: float, sweep: Sweep,
+                  base: FloatArray, tol: float) -> float | None:
+    """Share of the sweep capsules that cut through an enclosure holding the robot's base
+    (a circle, sphere or cylinder with free space inside and the base inside it), or None
+    when the primitive is no such enclosure.
+
+    A bore the robot stands in bounds nearly all its motion; the arm leaves it only through
+    openings (well_junction's main bore: 13-15 % of the capsules, the ones in the branch). A
+    circle through two clusters of wall contacts that happens to hold the base has most of
+    the arm's motion outside it (lab_circle seed 15, 20 s: 77 %)."""
+    if kind not in ENCLOSURES or free_side > 0 or len(sweep) == 0:
+        return None
+    if float(primitive.signed_distance(np.asarray(base, dtype=float)[None])[0]) >= 0:
+        return None
+    return len(cut_feet(primitive, free_side, sweep, tol)) / len(sweep)
+
+
 def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray
            ) -> tuple[FloatArray, FloatArray]:
     """Curve coordinates [m] of the support points and of the cut feet inside the support's
