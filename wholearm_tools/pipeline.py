@@ -400,22 +400,13 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                             "contact (labelled link)")
             continue
         support = _support_points(fit, data, members, n_tip)
-        share = (None if sweep is None or base is None else crossing.escaped_share(
-            fit.kind, fit.primitive, fit.free_side, sweep, base, tol=max(5.0 * seg.noise, 2e-3)))
-        if share is not None and share > ENCLOSURE_MAX_ESCAPED:
-            messages.append(f"a {fit.kind} on {len(members)} contacts not reported: it would "
-                            f"enclose the robot's base, yet {100 * share:.0f} % of the robot's "
-                            "motion went through it")
+        why = None if sweep is None else crossing.sweep_objection(
+            fit.kind, fit.params, fit.primitive, fit.free_side, support, sweep, base,
+            tol=max(5.0 * seg.noise, 2e-3), need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
+            min_cuts=CROSSING_MIN_CUTS, max_escaped=ENCLOSURE_MAX_ESCAPED)
+        if why:
+            messages.append(f"a {fit.kind} on {len(members)} contacts not reported: {why}")
             continue
-        if sweep is not None and fit.kind in crossing.CHECKED:
-            feet = crossing.cut_feet(fit.primitive, fit.free_side, sweep,
-                                     tol=max(5.0 * seg.noise, 2e-3))
-            why = crossing.crossed_between(fit.kind, fit.params, support, feet,
-                                           need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
-                                           min_cuts=CROSSING_MIN_CUTS)
-            if why:
-                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: {why}")
-                continue
         pid = len(primitives)
         # duplicates follow their representative
         dup = np.isin(group, group[rows])

@@ -106,16 +106,27 @@ def test_other_types_are_not_checked(kind):
 
 
 def test_an_enclosure_holding_the_base_must_hold_most_of_the_motion():
-    from wholearm_tools.fit.crossing import escaped_share
+    from wholearm_tools.fit.crossing import sweep_objection
 
     bore = Circle2D([0.0, 0.0], 0.3)  # free inside (-1), the base at the centre
+    params = {"center": [0.0, 0.0], "radius": 0.3}
     ang = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
+    support = 0.3 * np.c_[np.cos(ang), np.sin(ang)]
     inside = Sweep(np.zeros((40, 2)), 0.2 * np.c_[np.cos(ang), np.sin(ang)], np.full(40, 0.01))
-    out = Sweep(np.zeros((40, 2)), 0.5 * np.c_[np.cos(ang), np.sin(ang)], np.full(40, 0.01))
+    # 30 of 40 capsules reach out through the wall (between contacts that surround it, so
+    # the curve rule alone would rule it out too: give it a wide support gap)
+    reach = np.where(np.arange(40) < 30, 0.5, 0.2)[:, None]
+    out = Sweep(np.zeros((40, 2)), reach * np.c_[np.cos(ang), np.sin(ang)], np.full(40, 0.01))
+
+    def why(sweep, base, side=-1.0, sup=support):
+        return sweep_objection("circle", params, bore, side, sup, sweep, base, tol=2e-3,
+                               need=5, min_span=0.01, min_cuts=3, max_escaped=0.5)
+
     base = np.zeros(2)
-    assert escaped_share("circle", bore, -1.0, inside, base, tol=2e-3) == 0.0
-    assert escaped_share("circle", bore, -1.0, out, base, tol=2e-3) == 1.0
-    # a post (free outside) or an enclosure the base stands outside of is not checked
-    assert escaped_share("circle", bore, 1.0, out, base, tol=2e-3) is None
-    assert escaped_share("circle", bore, -1.0, out, np.array([1.0, 0.0]), tol=2e-3) is None
-    assert escaped_share("line", LINE, -1.0, out, base, tol=2e-3) is None
+    assert why(inside, base) is None
+    assert "75 % of the robot's motion went through it" in why(out, base)
+    # no base given, or the base outside the circle: only the curve rule applies (the cuts
+    # at 0-270 degrees lie outside the contacts at 280-350 degrees)
+    few = support[np.arange(40) >= 31]
+    assert why(out, None, sup=few) is None
+    assert why(out, np.array([1.0, 0.0]), sup=few) is None

@@ -52,21 +52,42 @@ def cut_feet(primitive: Any, free_side: float, sweep: Sweep, tol: float) -> Floa
 ENCLOSURES = ("circle", "sphere", "cylinder")
 
 
-def escaped_share(kind: str, primitive: Any, free_side: float, sweep: Sweep,
-                  base: FloatArray, tol: float) -> float | None:
-    """Share of the sweep capsules that cut through an enclosure holding the robot's base
-    (a circle, sphere or cylinder with free space inside and the base inside it), or None
-    when the primitive is no such enclosure.
+def escaped_share(kind: str, primitive: Any, free_side: float, base: FloatArray,
+                  n_cuts: int, n_capsules: int) -> float | None:
+    """Share ``n_cuts / n_capsules`` of the sweep capsules that cut through an enclosure
+    holding the robot's base (a circle, sphere or cylinder with free space inside and the base
+    inside it), or None when the primitive is no such enclosure.
 
     A bore the robot stands in bounds nearly all its motion; the arm leaves it only through
     openings (well_junction's main bore: 13-15 % of the capsules, the ones in the branch). A
     circle through two clusters of wall contacts that happens to hold the base has most of
     the arm's motion outside it (lab_circle seed 15, 20 s: 77 %)."""
-    if kind not in ENCLOSURES or free_side > 0 or len(sweep) == 0:
+    if kind not in ENCLOSURES or free_side > 0 or n_capsules == 0:
         return None
     if float(primitive.signed_distance(np.asarray(base, dtype=float)[None])[0]) >= 0:
         return None
-    return len(cut_feet(primitive, free_side, sweep, tol)) / len(sweep)
+    return n_cuts / n_capsules
+
+
+def sweep_objection(kind: str, params: dict[str, Any], primitive: Any, free_side: float,
+                    support: FloatArray, sweep: Sweep, base: FloatArray | None, *, tol: float,
+                    need: int, min_span: float, min_cuts: int, max_escaped: float
+                    ) -> str | None:
+    """Why the robot's own motion rules a fitted primitive out, or None: an enclosure holding
+    the base that more than ``max_escaped`` of the capsules cut through
+    (:func:`escaped_share`), or a line, circle or plane crossed between its contacts
+    (:func:`crossed_between`, with ``need``, ``min_span`` and ``min_cuts``).  ``tol``: the
+    depth a capsule must cut to count."""
+    if kind not in CHECKED and kind not in ENCLOSURES:
+        return None
+    feet = cut_feet(primitive, free_side, sweep, tol)
+    share = (None if base is None else
+             escaped_share(kind, primitive, free_side, base, len(feet), len(sweep)))
+    if share is not None and share > max_escaped:
+        return (f"it would enclose the robot's base, yet {100 * share:.0f} % of the robot's "
+                "motion went through it")
+    return crossed_between(kind, params, support, feet, need=need, min_span=min_span,
+                           min_cuts=min_cuts)
 
 
 def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray
