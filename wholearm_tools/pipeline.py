@@ -261,6 +261,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                sweep: Any, base: NDArray | None, pool: Executor | None,
                ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     from wholearm_tools.fit import crossing, fit_primitive, segment
+    from wholearm_tools.fit.core import sweep_tolerance
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.mesh import support_extent
 
@@ -402,7 +403,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
         support = _support_points(fit, data, members, n_tip)
         why = None if sweep is None else crossing.sweep_objection(
             fit.kind, fit.params, fit.primitive, fit.free_side, support, sweep, base,
-            tol=max(5.0 * seg.noise, 2e-3), need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
+            tol=sweep_tolerance(seg.noise), need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
             min_cuts=CROSSING_MIN_CUTS, max_escaped=ENCLOSURE_MAX_ESCAPED)
         if why:
             messages.append(f"a {fit.kind} on {len(members)} contacts not reported: {why}")

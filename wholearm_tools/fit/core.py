@@ -612,6 +612,13 @@ def _surrounded(primitive: Any, x: np.ndarray, foot: np.ndarray, support: np.nda
     return gaps.max(axis=1) < np.pi
 
 
+def sweep_tolerance(sigma: float) -> float:
+    """Depth [m] a sweep capsule must cut into a fitted surface to count against it:
+    ``max(5 sigma, 2 mm)``, for the sweep rule of fit-and-grow and the report rules of
+    :mod:`wholearm_tools.fit.crossing` alike."""
+    return max(5.0 * float(sigma), 2e-3)
+
+
 def sweep_violation(primitive: Any, free_side: float, support: np.ndarray, sweep: Sweep,
                     *, near: float, tol: float) -> SweepCheck:
     """How the robot's sweep cuts into a fitted surface next to its own contacts.

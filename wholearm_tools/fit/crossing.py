@@ -127,13 +127,11 @@ def crossed_between(kind: str, params: dict[str, Any], support: FloatArray, feet
     if kind == "plane":
         from scipy.spatial import Delaunay, QhullError
 
+        from wholearm_tools.fit.models import perp_bases
+
         n = np.asarray(params["normal"], dtype=float)
-        n = n / np.linalg.norm(n)
-        e1 = np.eye(3)[int(np.argmin(np.abs(n)))]
-        e1 = e1 - (e1 @ n) * n
-        e1 = e1 / np.linalg.norm(e1)
-        e2 = np.cross(n, e1)
-        basis = np.stack([e1, e2], axis=1)
+        e1, e2 = perp_bases((n / np.linalg.norm(n))[None])
+        basis = np.stack([e1[0], e2[0]], axis=1)
         try:
             hull = Delaunay(support @ basis)
         except QhullError:  # support points on a line: no region between them

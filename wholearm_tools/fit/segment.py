@@ -62,6 +62,7 @@ from wholearm_tools.fit.core import (
     fit_primitive,
     free_space_violation,
     residuals,
+    sweep_tolerance,
     sweep_violation,
 )
 from wholearm_tools.fit.data import FitData, Sweep
@@ -532,7 +533,7 @@ def segment(
             pts.append(sub.link_a + np.asarray(t)[:, None] * (sub.link_b - sub.link_a))
         support = np.asarray(prim.closest_point(np.vstack(pts)))
         check = sweep_violation(prim, fit.free_side, support, sweep, near=sweep_near,
-                                tol=max(5.0 * sigma, 2e-3))
+                                tol=sweep_tolerance(sigma))
         return not check.rules_out()
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
