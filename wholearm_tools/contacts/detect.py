@@ -397,7 +397,8 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
     tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
     consistent = torque_consistent(robot, q[rows], bd.x, bd.normal, qd[rows] != 0, held[rows],
-                                   tau[rows], tau_tol, cand, B, np.radians(force_angle))
+                                   tau[rows], tau_tol, cand, B, np.radians(force_angle),
+                                   one_force=True)
     mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
     out = []
     for g, (lo, _hi) in enumerate(groups):
@@ -409,24 +410,32 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
 def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
                       moving: NDArray[np.bool_], held: NDArray[np.bool_], tau: FloatArray,
                       tau_tol: FloatArray, cand: IntArray, B: float, angle: float,
-                      ) -> NDArray[np.bool_]:
+                      one_force: bool = False) -> NDArray[np.bool_]:
     """Which dilated-boundary points of link ``cand[r]`` could have made the contact, judged by
     the torques of the held joints.
 
     A frictionless contact at robot point ``r`` (boundary point ``x`` minus ``B`` along its
     outward normal ``nu``) pushes along ``-nu``; its moment about joint ``i <= cand`` is
     ``f g_i``, ``g_i = (a_i x (r - o_i)) . (-nu)``, zero beyond ``cand``.  ``f`` is fitted to the
-    torques of the ``moving`` joints (least squares, ``f >= 0``); a point is consistent when every
-    ``held`` joint's observed torque lies within ``tau_tol`` of its prediction ``-f g_i``,
-    widened by the change of the moment when the force leans up to ``angle`` from the normal
-    (friction, quadrature spacing).
+    torques of the ``moving`` joints (least squares, ``f >= 0``).  The force may lean from the
+    normal by up to ``angle`` (friction, quadrature spacing):
+
+    * ``one_force=False``: a point is consistent when every ``held`` joint's observed torque
+      lies within ``tau_tol`` of its prediction ``-f g_i``, widened by the change of the moment
+      when the force leans by ``angle`` (``sin(angle) f |a_i x (r - o_i)|``) — each joint
+      judged on its own, as if each could have a lean of its own;
+    * ``one_force=True``: consistent when **one** lean ``t`` (tangent to the boundary,
+      ``|t| <= tan(angle)``, force ``f (-nu + t)``) brings every held joint's prediction within
+      ``tau_tol`` of the observed torque at once — one contact has one force.  Stricter where
+      several held joints constrain the lean: an unloaded wrist and the loads of two other held
+      joints cannot each take the lean that suits it.
 
     Parameters
     ----------
     q, moving, held, tau : (R, n) configuration, joints driven into the stop, held joints,
         torques at the height of the stop
     x_bd : (R, Q, d) boundary points; nu : (R, Q, 3) their outward unit normals
-    tau_tol : (n,) torque tolerance; cand : (R,) candidate link; B : dilation [m]
+    tau_tol : (n,) or (R, n) torque tolerance; cand : (R,) candidate link; B : dilation [m]
     angle : float [rad]
 
     Returns
@@ -435,6 +444,7 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     """
     R, Qn = x_bd.shape[:2]
     n = robot.dof
+    tol = np.broadcast_to(np.asarray(tau_tol, dtype=float), (R, n))
     pts = robot.joint_positions(q)                    # (R, n+1, 3)
     axes = robot.joint_axes(q)                        # (R, n, 3)
     x = np.zeros((R, Qn, 3))
@@ -448,11 +458,73 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     gb = np.where(mv, g, 0.0)
     f = np.maximum(-np.einsum("rqj,rj->rq", gb, np.where(moving, tau, 0.0))
                    / np.maximum(np.einsum("rqj,rqj->rq", gb, gb), 1e-300), 0.0)
-    pred = -f[..., None] * g                          # (R, Q, n)
-    slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
-    slack = np.where(on_chain, slack, 0.0)
-    ok = np.abs(pred - tau[:, None, :]) <= tau_tol[None, None, :] + slack
-    return np.all(~held[:, None, :] | ok, axis=-1)
+    if not one_force:
+        pred = -f[..., None] * g                      # (R, Q, n)
+        slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
+        slack = np.where(on_chain, slack, 0.0)
+        ok = np.abs(pred - tau[:, None, :]) <= tol[:, None, :] + slack
+        return np.all(~held[:, None, :] | ok, axis=-1)
+    # moment change per unit lean along two tangent directions e1, e2 of the boundary
+    e1 = np.cross(nu, np.where(np.abs(nu[..., :1]) < 0.9, [1.0, 0, 0], [0, 1.0, 0]))
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    e2 = np.cross(nu, e1)
+    L = np.stack([np.einsum("rqjk,rqk->rqj", lever, e1),
+                  np.einsum("rqjk,rqk->rqj", lever, e2)], -1)              # (R, Q, n, 2)
+    L = np.where(on_chain[..., None], L, 0.0)
+    # held joint i: observed tau_i = -f (g_i + L_i . t)  =>  | f L_i . t - b_i | <= tol_i
+    b = -(f[..., None] * g + tau[:, None, :])
+    return _lean_feasible(f[..., None, None] * L, b, np.broadcast_to(tol[:, None, :], b.shape),
+                          np.broadcast_to(held[:, None, :], b.shape), float(np.tan(angle)))
+
+
+def _lean_feasible(A: FloatArray, b: FloatArray, c: FloatArray, use: NDArray[np.bool_],
+                   radius: float, chunk: int = 20000) -> NDArray[np.bool_]:
+    """Whether some ``t`` with ``|t| <= radius`` meets ``|A_i . t - b_i| <= c_i`` for every
+    ``i`` where ``use`` (``A (..., H, 2)``, ``b, c, use (..., H)``) → ``(...) bool``.
+
+    The slabs cut a convex polygon out of the plane; it meets the disc exactly when its point
+    nearest the origin does, and that point is the origin, the foot of the origin on one of the
+    polygon's edge lines, or a vertex (two edge lines crossing).  Every such candidate is
+    tested.
+    """
+    shape = b.shape[:-1]
+    H = b.shape[-1]
+    A = A.reshape(-1, H, 2)
+    b = b.reshape(-1, H)
+    c = c.reshape(-1, H)
+    use = use.reshape(-1, H)
+    out = np.zeros(A.shape[0], dtype=bool)
+    # half-planes p . t <= h: A t <= b + c and -A t <= c - b; unused ones never bind
+    for lo in range(0, A.shape[0], chunk):
+        sl = slice(lo, lo + chunk)
+        a_, b_, c_, u_ = A[sl], b[sl], c[sl], use[sl]
+        p = np.concatenate([a_, -a_], 1)                                # (P, 2H, 2)
+        h = np.concatenate([b_ + c_, c_ - b_], 1)
+        uu = np.concatenate([u_, u_], 1)
+        p = np.where(uu[..., None], p, 0.0)
+        h = np.where(uu, h, np.inf)
+        pn2 = np.einsum("pjk,pjk->pj", p, p)
+        scale = np.sqrt(pn2) * radius + np.abs(np.where(np.isfinite(h), h, 0.0)) + 1e-12
+        # candidates: origin, feet of the origin on each line, crossings of pairs of lines
+        foot = np.where((pn2 > 1e-300)[..., None],
+                        np.where(np.isfinite(h), h, 0.0)[..., None] * p
+                        / np.maximum(pn2, 1e-300)[..., None], 0.0)
+        i1, i2 = np.triu_indices(2 * H, 1)
+        p1, p2 = p[:, i1], p[:, i2]
+        det = p1[..., 0] * p2[..., 1] - p1[..., 1] * p2[..., 0]
+        h1 = np.where(np.isfinite(h[:, i1]), h[:, i1], 0.0)
+        h2 = np.where(np.isfinite(h[:, i2]), h[:, i2], 0.0)
+        ok_det = np.abs(det) > 1e-12 * np.sqrt(pn2[:, i1] * pn2[:, i2]) + 1e-300
+        dd = np.where(ok_det, det, 1.0)
+        vert = np.stack([(h1 * p2[..., 1] - h2 * p1[..., 1]) / dd,
+                         (p1[..., 0] * h2 - p2[..., 0] * h1) / dd], -1)
+        vert = np.where(ok_det[..., None], vert, 0.0)
+        cands = np.concatenate([np.zeros((p.shape[0], 1, 2)), foot, vert], 1)  # (P, C, 2)
+        inside = np.einsum("pck,pck->pc", cands, cands) <= radius**2 * (1 + 1e-9) + 1e-300
+        slack = h[:, None, :] - np.einsum("pck,pjk->pcj", cands, p)
+        meets = np.all(slack >= -1e-9 * scale[:, None, :], axis=-1)
+        out[sl] = np.any(inside & meets, axis=1)
+    return out.reshape(shape)
 
 
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
