@@ -83,3 +83,26 @@ def test_rows_without_held_joints_are_all_consistent(one_force):
                            np.ones((1, 5)), np.full(5, 0.1), np.array([4]), 0.02,
                            np.radians(20), one_force=one_force)
     assert ok.tolist() == [[True, True]]
+
+
+def test_signature_from_the_unclipped_part_of_the_stop():
+    """lab_circle seed 1, t = 38 s: joint 0 turns, link 1's body presses on the post and the
+    held elbow reaches its 3 N m effort limit before the shoulder does.  The clipped torques
+    (-4.7, -3.0) said the force ran through the tip; the signature is the held joint's load
+    relative to the driving torque while neither is clipped, and with it eq. (2)'s
+    torque-consistent boundary is the link's side."""
+    from wholearm_tools.classify import tip_probability
+
+    robot, run = replay("lab_circle", [0.0523, 1.7095], [-1.1361, 0.0], beyond=0.3)
+    assert run.truth.contact_kind.tolist() == ["body"]
+    c = detect_contacts(run.log, robot)
+    assert c.link.tolist() == [1] and c.held[0].tolist() == [False, True]
+    limit = np.asarray(robot.effort_limits)
+    assert np.all(np.abs(c.tau_peak[0]) < limit)
+    # the load ratio of the log's unclipped stop samples
+    tau = np.asarray(run.log.tau_cmd)
+    k = c.index[0] + np.arange(5, 40)
+    free = np.all(np.abs(tau[k]) < limit * (1 - 1e-9), axis=1)
+    ratio = np.median(tau[k[free], 1] / tau[k[free], 0])
+    assert c.tau_peak[0, 1] / c.tau_peak[0, 0] == pytest.approx(ratio, rel=0.02)
+    assert tip_probability(run, c, 0.02).label.tolist() == ["link"]

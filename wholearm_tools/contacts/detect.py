@@ -138,8 +138,12 @@ class Contacts:
     velocity_threshold, torque_threshold : (n,) float
         The thresholds that were used (noise-derived unless overridden).
     tau_peak : (M, n) float
-        Commanded torques at the height of the stop (the sample of largest total |tau| while
-        this contact's state lasts): the contact force's signature.  Zeros when unknown.
+        The contact force's torque signature: the commanded torques at the height of the stop
+        where none of the joints involved is clipped (the sample with the largest driving
+        torques while the driving and the held joints are at rest below their effort limits —
+        a clipped torque no longer grows with the force), each held joint's entry replaced by
+        its load (change from its rest level), fitted over the whole stop in proportion to the
+        driving torques.  Zeros when unknown.
     held : (M, n) bool
         Joints at rest and unloaded just before the stop (not driven by this move): their
         torque at the stop is the contact force's moment alone.  All False when unknown.
@@ -527,6 +531,80 @@ def _lean_feasible(A: FloatArray, b: FloatArray, c: FloatArray, use: NDArray[np.
     return out.reshape(shape)
 
 
+def _clip_levels(tau: FloatArray, robot: RobotModel | None) -> FloatArray:
+    """Torque level at which each joint's command is clipped (inf when unknown).
+
+    The URDF's effort limits, where the log never exceeds them: a commanded torque at its limit
+    is clipped and no longer measures the contact force.
+    """
+    n = tau.shape[1]
+    if robot is None:
+        return np.full(n, np.inf)
+    lim = np.asarray(robot.effort_limits, dtype=float)
+    peak = np.abs(tau).max(axis=0) if tau.shape[0] else np.zeros(n)
+    ok = np.isfinite(lim) & (lim > 0) & (peak <= lim * (1 + 1e-6))
+    return np.where(ok, lim, np.inf)
+
+
+def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArray[np.bool_],
+                  s: int, e: int, moving: NDArray[np.bool_], held: NDArray[np.bool_],
+                  base_end: int, base_max: int, sigma_tau: FloatArray,
+                  ) -> tuple[FloatArray, FloatArray]:
+    """The contact's torque signature over a stop ``s..e``, and the held joints' uncertainty.
+
+    Returns ``(tau_ref (n,), se (n,))``.  ``tau_ref`` holds the commanded torques at the
+    reference sample — the sample of the stop, with the joints that drove into it and the held
+    joints at rest and none of them clipped, where the driving torques are largest (a clipped
+    torque no longer grows with the force) — and, for each held joint, its *load*: the change
+    from its level at rest before the stop, fitted over the whole stop as proportional to the
+    driving torques (the force and with it every held joint's moment grow together) and
+    evaluated at the reference sample.  ``se`` is that load's standard error (residual scale,
+    at least the torque noise, through the fit and the rest level); ``inf`` for joints that
+    are not held.  Without such a sample (a stop clipped at once or too short) the largest
+    sample of the stop is used and the error is a single sample's.
+    """
+    n = tau.shape[1]
+    se = np.full(n, np.inf)
+    use = moving & stopped[s]          # the joints that drove into the stop and were blocked
+    part = use | held
+    ks = np.arange(s, e)
+    valid = np.all(stopped[s:e][:, part], axis=1) & ~np.any(saturated[s:e][:, part], axis=1)
+    base = np.zeros(n)
+    n_base = np.ones(n)
+    for j in np.flatnonzero(held):
+        k0 = base_end
+        while k0 > max(0, base_end - base_max) and stopped[k0 - 1, j]:
+            k0 -= 1
+        if k0 < base_end:
+            base[j] = float(tau[k0:base_end, j].mean())
+            n_base[j] = base_end - k0
+    if not np.any(valid):
+        seg = tau[s:e]
+        out = seg[int(np.argmax(np.abs(seg).sum(axis=1)))].copy()
+        out[held] -= base[held]
+        se[held] = sigma_tau[held] * np.sqrt(1 + 1 / n_base[held])
+        return out, se
+    ks = ks[valid]
+    if np.any(use):
+        drive = tau[ks][:, use]
+        r = int(np.argmax(np.abs(drive).sum(axis=1)))
+        u = drive[r] / max(float(np.linalg.norm(drive[r])), 1e-300)
+        rho = drive @ u
+    else:
+        r = ks.shape[0] - 1
+        rho = np.ones(ks.shape[0])
+    out = tau[ks[r]].copy()
+    ss = max(float(rho @ rho), 1e-300)
+    for j in np.flatnonzero(held):
+        d = tau[ks, j] - base[j]
+        beta = float(d @ rho) / ss
+        out[j] = beta * rho[r]
+        res = d - beta * rho
+        sig = max(float(sigma_tau[j]), float(np.sqrt(res @ res / max(ks.shape[0] - 1, 1))))
+        se[j] = sig * np.sqrt(rho[r] ** 2 / ss + 1 / n_base[j])
+    return out, se
+
+
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
                      blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
                      qd_s: FloatArray, v_th: FloatArray, window: int,
@@ -658,12 +736,13 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     q = np.asarray(log.q)
     qd = np.asarray(log.qd)
     lag = max(1, round(params.smooth_time / dt) // 2)
+    limit = _clip_levels(tau, robot)
+    saturated = np.abs(tau) >= limit * (1 - 1e-9)
     M = len(rows)
-    idx = np.array([r[0] for r in rows])
-    out_q = q[idx].copy()
     out_qd = np.zeros((M, n))
     t_end = np.empty(M)
     peak = np.zeros((M, n))
+    load_se = np.full((M, n), np.inf)
     held = np.zeros((M, n), dtype=bool)
     for i, (s, e, link) in enumerate(rows):
         # the segment may end when an outer link stops too; the blocked state lasts until the
@@ -672,8 +751,6 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         while k < labels.shape[0] and labels[k] >= link:
             k += 1
         t_end[i] = log.t[min(k, labels.shape[0] - 1)]
-        settle = q[s:min(s + min_len, e)]
-        out_q[i, :link + 1] = np.median(settle[:, :link + 1], axis=0)
         lo, hi = max(0, s - lag - nb), max(1, s - lag)
         out_qd[i] = qd[lo:hi].mean(axis=0)
         at_rest = np.all(stopped[lo:hi], axis=0)  # already stopped before this contact
@@ -683,9 +760,13 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         h0, h1 = max(0, lo - nb), max(1, lo)
         held[i] = (at_rest & np.all(stopped[h0:h1], axis=0)
                    & ~np.any(loaded[h0:h1], axis=0))
-        # torques at the height of the stop (the held joints' loads grow with the force)
-        seg = tau[s:max(e, s + 1)]
-        peak[i] = seg[int(np.argmax(np.abs(seg).sum(axis=1)))]
+        peak[i], load_se[i] = _stop_torques(tau, stopped, saturated, s, max(e, s + 1),
+                                            out_qd[i] != 0, held[i], h1, 5 * nb, sigma_tau)
+    idx = np.array([r[0] for r in rows])
+    out_q = q[idx].copy()
+    for i, (s, e, link) in enumerate(rows):
+        settle = q[s:min(s + min_len, e)]
+        out_q[i, :link + 1] = np.median(settle[:, :link + 1], axis=0)
     links = np.array([r[2] for r in rows])
     if params.rigid_outer and params.rigid_choice == "map" and robot is not None:
         which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
