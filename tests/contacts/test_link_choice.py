@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wholearm_tools.contacts import detect_contacts
+from wholearm_tools.contacts import DetectionParams, detect_contacts
 
 
 def replay(name, q_contact, direction, *, before=0.25, beyond=0.1, warm_up=None, duration=2.5):
@@ -106,3 +106,26 @@ def test_signature_from_the_unclipped_part_of_the_stop():
     ratio = np.median(tau[k[free], 1] / tau[k[free], 0])
     assert c.tau_peak[0, 1] / c.tau_peak[0, 0] == pytest.approx(ratio, rel=0.02)
     assert tip_probability(run, c, 0.02).label.tolist() == ["link"]
+
+
+def test_a_held_wrist_lightly_loaded_puts_the_contact_beyond_it():
+    """paper_spatial seed 2, t = 13.4 s: only the elbow moves, and its command ends just past
+    the stop, so the tip rests on the floor with a small force pushed nearly along the last
+    link.  The held wrist pitch carries 0.07 N m - under its motion threshold (a fifth of its
+    median torque while moving, 0.095 N m after the free wrist move that starts the run) but
+    some twenty noise sigmas clear of zero.  Joints beyond the link in contact carry nothing,
+    so the contact is on the last link (it was given to the elbow's link-3 group)."""
+    robot, run = replay("paper_spatial", [0.2561, -0.3682, 0.8987, 0.0, 0.5],
+                        [0, 0, 0.2124, 0, 0], beyond=0.003, warm_up=[0, 0, 0, 0.5, 0.7],
+                        duration=6.0)
+    assert run.truth.contact_link.tolist() == [4]
+    assert run.truth.contact_kind.tolist() == ["tip"]
+    c = detect_contacts(run.log, robot)
+    assert c.held[0].tolist() == [True, True, False, True, True]
+    assert 6 * c.meta["sigma_torque"][4] < abs(c.tau_peak[0, 4]) < c.torque_threshold[4]
+    assert c.link.tolist() == [4]
+    # without a robot model (no map, the outermost link of a rigid group) and without rigid
+    # groups (the torque-identified link) the load decides alike
+    assert detect_contacts(run.log).link.tolist() == [4]
+    assert detect_contacts(run.log, params=DetectionParams(rigid_outer=False)).link.tolist() \
+        == [4]

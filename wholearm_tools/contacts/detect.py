@@ -605,6 +605,44 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
     return out, se
 
 
+def _raise_to_loaded_held(rows: list[tuple[int, int, int]], inner: dict[int, int],
+                          held: NDArray[np.bool_], load: FloatArray, se: FloatArray,
+                          stopped: NDArray[np.bool_], loaded: NDArray[np.bool_],
+                          sigma_tau: FloatArray, k: float, nb: int, rigid_outer: bool,
+                          ) -> list[tuple[int, int, int]]:
+    """A held joint beyond the contact link that carries a load moves the contact outward.
+
+    A held joint (at rest and unloaded before the stop, not driven by the move) feels the
+    contact force only through a contact on its own link or beyond: joints beyond the link in
+    contact carry nothing.  Its load can stay under the *motion* threshold of ``loaded`` (a
+    fraction of the joint's torque while it moves) — a tip pushed nearly along the last link
+    loads the wrist by a small moment — yet stand clear of the noise.  When held joint ``m``
+    beyond the innermost link of a contact's group carries a load of more than ``k`` standard
+    errors (and more than one noise sigma), and joints ``0..m`` are stopped, the contact is on
+    link ``m`` or beyond: the group becomes ``m..hi`` (extended past ``m`` over joints at rest
+    and unloaded, as in :func:`_extend_rigid`).  ``inner`` is updated in place.
+    """
+    n = held.shape[1]
+    out = []
+    for i, (s, e, link) in enumerate(rows):
+        lo = inner.get(s, link)
+        sig = held[i] & (np.abs(load[i]) > k * se[i]) & (np.abs(load[i]) > sigma_tau)
+        cand = [j for j in np.flatnonzero(sig) if j > lo and np.all(stopped[s, :j + 1])]
+        if not cand:
+            out.append((s, e, link))
+            continue
+        m = int(max(cand))
+        hi = max(link, m) if rigid_outer else m
+        if rigid_outer and m > link:
+            b0 = max(0, s - nb)
+            while (hi + 1 < n and np.all(stopped[b0:s + 1, hi + 1])
+                   and not np.any(loaded[b0:s + 1, hi + 1]) and not sig[hi + 1]):
+                hi += 1
+        inner[s] = m
+        out.append((s, e, hi))
+    return out
+
+
 def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
                      blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
                      qd_s: FloatArray, v_th: FloatArray, window: int,
@@ -762,6 +800,8 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                    & ~np.any(loaded[h0:h1], axis=0))
         peak[i], load_se[i] = _stop_torques(tau, stopped, saturated, s, max(e, s + 1),
                                             out_qd[i] != 0, held[i], h1, 5 * nb, sigma_tau)
+    rows = _raise_to_loaded_held(rows, inner, held, peak, load_se, stopped, loaded, sigma_tau,
+                                 params.k_torque, nb, params.rigid_outer)
     idx = np.array([r[0] for r in rows])
     out_q = q[idx].copy()
     for i, (s, e, link) in enumerate(rows):
