@@ -1,7 +1,7 @@
 """Contact detection and tip/link classification accuracy on every bundled scenario.
 
 Run: ``.venv/bin/python benchmarks/bench_classify.py [--seeds 3] [--duration SECONDS]
-[--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar]``
+[--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar] [--list]``
 
 For every scenario × seed the run is simulated in process; for every B the contacts are
 classified offline (whole-run map) and causally (map up to each contact).  Columns:
@@ -12,6 +12,10 @@ classified offline (whole-run map) and causally (map up to each contact).  Colum
   ambiguous), offline; ``amb%``: ambiguous fraction, offline; ``lab%c``/``amb%c``: causal;
 * ``|P-T| off`` / ``|P-T| cau``: mean |P_T − truth| (truth 1 for tip/joint, 0 for body);
 * ``s``: seconds spent in detection + classification (both modes), summed over the seeds.
+
+``--list`` also prints every detection whose link differs from its true contact's (time,
+detected link, true link, kind and fraction along the link, the held joints and the torque
+signature) and every true contact no detection matched.
 """
 
 from __future__ import annotations
@@ -26,7 +30,9 @@ from wholearm_tools.contacts import detect_contacts, match_truth
 from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
 
-def evaluate(run, B):
+def evaluate(run, B, wrong=None):
+    """Accuracy counts of one run at one B; appends one line per misidentified or missed
+    contact to ``wrong`` when given."""
     t0 = time.perf_counter()
     contacts = detect_contacts(run.log, run.robot)
     grid = swept_map(run.robot, run.log.q, B=B)
@@ -47,7 +53,26 @@ def evaluate(run, B):
         row[f"amb_{name}"] = int(np.sum(ok & (cl.label == "ambiguous")))
         row[f"err_{name}"] = float(np.sum(np.abs(cl.p_tip - true_tip)[ok]))
         row["matched"] = int(ok.sum())
+    if wrong is not None:
+        wrong.extend(_misidentified(contacts, truth, m))
     return row
+
+
+def _misidentified(contacts, truth, m):
+    out = []
+    true_link = np.where(m >= 0, truth.contact_link[np.maximum(m, 0)], -1)
+    for i in np.flatnonzero(contacts.link != true_link):
+        j = int(m[i])
+        what = (f"true link {truth.contact_link[j]} {truth.contact_kind[j]} "
+                f"s={truth.contact_s[j]:.2f}" if j >= 0 else "no true contact")
+        held = "".join("h" if h else "." for h in contacts.held[i])
+        sig = " ".join(f"{v:.3g}" for v in contacts.tau_peak[i])
+        out.append(f"t={contacts.t[i]:.3f} #{i} link {contacts.link[i]}, {what}; "
+                   f"held {held}, torques [{sig}]")
+    for j in np.setdiff1d(np.arange(truth.n_contacts), m[m >= 0]):
+        out.append(f"t={truth.contact_t[j]:.3f} missed: true link {truth.contact_link[j]} "
+                   f"{truth.contact_kind[j]} s={truth.contact_s[j]:.2f}")
+    return out
 
 
 def main() -> None:
@@ -57,6 +82,8 @@ def main() -> None:
                     help="seconds per run (default: each scenario's own duration)")
     ap.add_argument("--B", type=float, nargs="+", default=[0.01, 0.02, 0.04])
     ap.add_argument("--scenarios", nargs="+", default=None)
+    ap.add_argument("--list", action="store_true",
+                    help="print every misidentified or missed contact")
     args = ap.parse_args()
     names = args.scenarios or list_scenarios()
     head = (f"{'scenario':<14} {'B':>5} {'det':>9} {'link%':>6} {'lab%':>6} {'amb%':>5} "
@@ -67,13 +94,18 @@ def main() -> None:
     for name in names:
         sc = load_scenario(name)
         runs = [sc.simulate(seed=s, duration=args.duration).run for s in range(args.seeds)]
-        for B in args.B:
-            rows = [evaluate(run, B) for run in runs]
+        for b_index, B in enumerate(args.B):
+            # detection does not depend on B: list its misses once per run
+            wrong = [[] if args.list and b_index == 0 else None for _ in runs]
+            rows = [evaluate(run, B, w) for run, w in zip(runs, wrong, strict=True)]
             agg = {k: sum(r[k] for r in rows) for k in rows[0]}
             acc = total.setdefault(B, dict.fromkeys(agg, 0.0))
             for k, v in agg.items():
                 acc[k] += v
             print(_line(name, B, agg))
+            for seed, w in enumerate(wrong):
+                for line in w or []:
+                    print(f"    {name} seed {seed} {line}")
     print("-" * len(head))
     for B, agg in total.items():
         print(_line("ALL", B, agg))

@@ -96,7 +96,8 @@ def test_signature_from_the_unclipped_part_of_the_stop():
     robot, run = replay("lab_circle", [0.0523, 1.7095], [-1.1361, 0.0], beyond=0.3)
     assert run.truth.contact_kind.tolist() == ["body"]
     c = detect_contacts(run.log, robot)
-    assert c.link.tolist() == [1] and c.held[0].tolist() == [False, True]
+    assert c.link.tolist() == [1]
+    assert c.held[0].tolist() == [False, True]
     limit = np.asarray(robot.effort_limits)
     assert np.all(np.abs(c.tau_peak[0]) < limit)
     # the load ratio of the log's unclipped stop samples
