@@ -69,7 +69,9 @@ class DetectionParams:
         A joint is loaded only when ``|tau_cmd|`` also exceeds this fraction of its median
         ``|tau_cmd|`` while it moves freely: a contact torque builds up beyond the motion
         torque, while a joint creeping near its target carries a torque that is far above the
-        (tiny) noise yet far below the motion level.
+        (tiny) noise yet far below the motion level.  A *held* joint (at rest and unloaded
+        before the stop) is not creeping: its load counts once it stands ``k_torque`` standard
+        errors clear of zero (:func:`_raise_to_loaded_held`).
     rigid_outer : bool
         When the joints beyond the stopped link were at rest and unloaded (a single-joint
         move), links ``n..m`` moved as one rigid body and the joint signals cannot tell which
