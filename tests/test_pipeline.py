@@ -314,8 +314,10 @@ def test_links_moving_in_one_plane_make_no_plane():
     # three link touches at one spot tried as tips, and one tip on the left wall 0.5 m away:
     # a line 247 mm RMS from the post it was matched to
     ("paper_planar", 8, 20.0, 0.03, "line"),
-    # tips at one height in both bores: a horizontal plane 36 mm RMS from the lateral
-    ("well_junction", 4, 30.0, 0.05, "plane"),
+    # (30 s of well_junction, seed 4, made a horizontal plane through tips at one height in
+    # both bores until its contact #7 was put on the right link; the plane rule is now
+    # covered by tests/fit/test_crossing.py only: no well_junction run of seeds 0-20 at 30 s
+    # makes such a plane any more)
     # four tips at one spot on the left wall and one on the top wall: a circle r 0.25 m
     # around the base, 124 mm RMS from the wall, 77 % of the motion outside it
     ("lab_circle", 15, 20.0, 0.02, "circle"),
