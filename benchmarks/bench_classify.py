@@ -30,9 +30,24 @@ from wholearm_tools.contacts import detect_contacts, match_truth
 from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
 
-def evaluate(run, B, wrong=None):
+def refined(run, B):
+    """Counts of the map-refined labels of one run at one B (a whole reconstruction)."""
+    import warnings
+
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.report.metrics import evaluate as score
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cm = score(reconstruct(run, B=B)).classification_map
+    conf = cm.confusion
+    return {"map_right": int(conf[0, 0] + conf[1, 1]), "map_decided": int(conf[:, :2].sum()),
+            "map_amb": int(conf[:, 2].sum()), "map_matched": int(conf.sum())}
+
+
+def evaluate(run, B, wrong=None, refine=False):
     """Accuracy counts of one run at one B; appends one line per misidentified or missed
-    contact to ``wrong`` when given."""
+    contact to ``wrong`` when given; with ``refine`` also the map-refined labels' counts."""
     t0 = time.perf_counter()
     contacts = detect_contacts(run.log, run.robot)
     grid = swept_map(run.robot, run.log.q, B=B)
@@ -55,6 +70,8 @@ def evaluate(run, B, wrong=None):
         row["matched"] = int(ok.sum())
     if wrong is not None:
         wrong.extend(_misidentified(contacts, truth, m))
+    if refine:
+        row.update(refined(run, B))
     return row
 
 
@@ -84,10 +101,13 @@ def main() -> None:
     ap.add_argument("--scenarios", nargs="+", default=None)
     ap.add_argument("--list", action="store_true",
                     help="print every misidentified or missed contact")
+    ap.add_argument("--refine", action="store_true",
+                    help="also score the labels refined by the fitted map (reconstructs)")
     args = ap.parse_args()
     names = args.scenarios or list_scenarios()
     head = (f"{'scenario':<14} {'B':>5} {'det':>9} {'link%':>6} {'lab%':>6} {'amb%':>5} "
-            f"{'lab%c':>6} {'amb%c':>5} {'|P-T| off':>9} {'|P-T| cau':>9} {'s':>5}")
+            f"{'lab%c':>6} {'amb%c':>5} {'|P-T| off':>9} {'|P-T| cau':>9} {'s':>5}"
+            + (f" {'lab%m':>6} {'amb%m':>5}" if args.refine else ""))
     print(head)
     print("-" * len(head))
     total: dict[float, dict[str, float]] = {}
@@ -97,7 +117,7 @@ def main() -> None:
         for b_index, B in enumerate(args.B):
             # detection does not depend on B: list its misses once per run
             wrong = [[] if args.list and b_index == 0 else None for _ in runs]
-            rows = [evaluate(run, B, w) for run, w in zip(runs, wrong, strict=True)]
+            rows = [evaluate(run, B, w, args.refine) for run, w in zip(runs, wrong, strict=True)]
             agg = {k: sum(r[k] for r in rows) for k in rows[0]}
             acc = total.setdefault(B, dict.fromkeys(agg, 0.0))
             for k, v in agg.items():
@@ -123,7 +143,10 @@ def _line(name: str, B: float, a: dict[str, float]) -> str:
             f"{100 * a['amb_off'] / matched:5.1f} "
             f"{_pct(a['label_ok_cau'], a['labelled_cau'])} "
             f"{100 * a['amb_cau'] / matched:5.1f} "
-            f"{a['err_off'] / matched:>9.3f} {a['err_cau'] / matched:>9.3f} {a['secs']:>5.1f}")
+            f"{a['err_off'] / matched:>9.3f} {a['err_cau'] / matched:>9.3f} {a['secs']:>5.1f}"
+            + (f" {_pct(a['map_right'], a['map_decided'])} "
+               f"{100 * a['map_amb'] / max(a['map_matched'], 1):5.1f}" if "map_right" in a
+               else ""))
 
 
 if __name__ == "__main__":
