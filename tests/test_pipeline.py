@@ -262,7 +262,8 @@ def test_a_wall_touched_only_by_the_tip_sits_at_the_tip_radius():
     from wholearm_tools.report.metrics import evaluate
     from wholearm_tools.sim.scenarios import load_scenario
 
-    rec = reconstruct(load_scenario("paper_planar").simulate(seed=0).run, B=0.03)
+    rec = reconstruct(load_scenario("paper_planar").simulate(seed=0, duration=60.0).run,
+                      B=0.03)
     acc = evaluate(rec).primitives
     assert 0 in {a.truth_id for a in acc}  # the top wall is found
     for a in acc:
