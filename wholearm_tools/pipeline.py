@@ -263,6 +263,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     from wholearm_tools.fit import crossing, fit_primitive, segment
     from wholearm_tools.fit.core import sweep_tolerance
     from wholearm_tools.fit.models import MODELS
+    from wholearm_tools.fit.segment import complete_support
     from wholearm_tools.mesh import support_extent
 
     dim = 2 if planar else 3
@@ -372,6 +373,9 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     if n_merged:
         messages.append(f"{n_merged} primitive(s) merged into another of the same type they "
                         "coincide with once refitted")
+    # contacts no primitive explains (fit-data indices), which an undetermined one may take
+    free = np.setdiff1d(np.arange(data.n_contacts),
+                        np.concatenate([m for _, m in groups] or [np.zeros(0, dtype=int)]))
     for fit, members in groups:
         if loss != "linear":
             # final refit of the segment with the robust loss, so contacts that the
@@ -384,10 +388,18 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                 messages.append(f"robust refit of a {fit.kind} failed ({robust.message}); "
                                 "kept the least-squares fit")
         if not seg.determined(fit, REPORT_ID_NOISE):
-            messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
-                            "contacts do not determine every parameter at "
-                            f"{REPORT_ID_NOISE:g} of the scene size")
-            continue
+            more, members_more = complete_support(fit, members, data, free, seg.noise,
+                                                  reach=COMPLETE_REACH)
+            if len(members_more) == len(members) or not seg.determined(more, REPORT_ID_NOISE):
+                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
+                                "contacts do not determine every parameter at "
+                                f"{REPORT_ID_NOISE:g} of the scene size")
+                continue
+            messages.append(f"a {fit.kind} on {len(members)} contacts that did not determine "
+                            f"it took {len(members_more) - len(members)} unexplained contacts "
+                            "it also explains once refitted")
+            free = np.setdiff1d(free, members_more)
+            fit, members = more, members_more
         rows = order[members]
         if fit.kind == "plane" and _links_lie_flat(fit.primitive, table.seg_a[rows],
                                                    table.seg_b[rows]):
@@ -469,6 +481,10 @@ def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
 #: (0.3-0.6 mm here) the limit is 330-670: all but the 222 go, the 174 stays; 1e-3 would drop
 #: a right post too.
 REPORT_ID_NOISE = 5e-4
+
+#: how far (metres) a contact may lie from a primitive its contacts do not determine to be
+#: tried as one more of its contacts (:func:`wholearm_tools.fit.segment.complete_support`)
+COMPLETE_REACH = 0.02
 
 
 def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,

@@ -182,3 +182,38 @@ def test_determined_at_a_noise_level():
     fit = seg.primitives[0]
     assert seg.determined(fit, 1e-6)
     assert not seg.determined(fit, 1e-1)
+
+
+def test_an_undetermined_post_is_completed_by_contacts_on_its_other_side():
+    """Link bodies touching a post along one side leave its radius and the centre's distance
+    free (a bigger post further away touches them too); tips on the post's other side fix
+    them, but a fit a few millimetres off never reaches them by growth.  complete_support
+    takes them one by one while one refit explains all, and leaves out a contact 5 mm off the
+    post and the contacts of another surface."""
+    from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.segment import complete_support
+
+    r, w_tip, w_link = 0.06, 0.02, 0.03
+    phi = np.radians(np.linspace(-10.0, 10.0, 8))
+    z = np.linspace(0.1, 0.5, 8)
+    centre = np.stack([(r + w_link) * np.cos(phi), (r + w_link) * np.sin(phi), z], axis=1)
+    along = np.stack([-np.sin(phi), np.cos(phi), np.zeros(8)], axis=1)  # tangent, horizontal
+    far = np.radians([150.0, 170.0, 190.0, 210.0])
+    tips = np.stack([(r + w_tip) * np.cos(far), (r + w_tip) * np.sin(far),
+                     [0.2, 0.3, 0.4, 0.25]], axis=1)
+    off = np.array([[-(r + w_tip + 0.005), 0.0, 0.35]])  # 5 mm off the post
+    floor = np.array([[0.3, 0.3, -0.08 + w_tip], [0.4, -0.2, -0.08 + w_tip]])
+    all_tips = np.vstack([tips, off, floor])
+    data = FitData.create(all_tips, w_tip, 1.0, centre - 0.1 * along, centre + 0.1 * along,
+                          w_link, 1.0, free_points=np.array([[0.5, 0.0, 0.3]]), dim=3)
+    links = np.arange(len(all_tips), data.n_contacts)  # FitData orders tips, then links
+    true = {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]), "radius": r}
+    # the one-sided support, fitted from a start 3 mm further out with a 3 mm bigger radius
+    start = {"point": np.array([0.003, 0.0, 0.0]), "axis": true["axis"], "radius": r - 0.003}
+    one_sided = fit_primitive("cylinder", data.take(links), initial=start, free_side=1.0)
+    assert one_sided
+    fit, members = complete_support(one_sided, links, data,
+                                    np.arange(len(all_tips)), sigma=1e-5)
+    assert members.tolist() == [0, 1, 2, 3, *links.tolist()]  # the far tips joined, no other
+    assert param_error("cylinder", fit.params, true) < 1e-6
+    assert fit.sensitivity < 0.1 * one_sided.sensitivity

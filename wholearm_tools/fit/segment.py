@@ -326,6 +326,62 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
     return fits
 
 
+def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
+                     candidates: np.ndarray, sigma: float, reach: float = 0.02,
+                     starts: int = 8, min_new: int = 2) -> tuple[FitResult, np.ndarray]:
+    """``fit`` (on the contacts ``members`` of ``data``) grown by those of ``candidates`` that
+    one refit explains with it.  Returns the fit and its members, unchanged unless at least
+    ``min_new`` contacts join.
+
+    A fit its contacts do not determine can be bent to pass through any one more contact, so
+    the first one taken decides where it goes: each of the ``starts`` candidates nearest to it
+    (within ``reach`` metres) is tried as the first, then the others join nearest first while
+    the refit's dof-corrected RMS residual stays at most 1.5 ``sigma`` (the chi-square level;
+    it stops when none of the three nearest left joins); the start that gathers the most
+    contacts wins (then the lowest RMS).
+
+    Growth takes the contacts within a few sigma of a hypothesis.  One that its contacts do
+    not determine - link bodies touching a post along one side - predicts the rest of its
+    surface millimetres off, so it never reaches the contacts that would determine it: on
+    paper_spatial (seed 0) a post r 0.06 m was fitted from nine link contacts 3 mm and 0.7 mm
+    from the truth, too weakly determined to report, while the post's tips and joint contacts
+    on its other side stayed unexplained."""
+    cand = np.asarray(candidates, dtype=np.int64)
+    if cand.size == 0:
+        return fit, members
+    r = np.abs(residuals(fit.kind, fit.params, data.take(cand), fit.free_side))
+    cand = cand[r <= reach][np.argsort(r[r <= reach])]
+
+    def refit(f: FitResult, idx: np.ndarray) -> FitResult | None:
+        out = fit_primitive(f.kind, data.take(idx), free_side=f.free_side,
+                            initial=dict(f.params))
+        return out if out and _rms_dof(out) <= 1.5 * sigma else None
+
+    best_fit, best_members = fit, members
+    for first in cand[:starts]:
+        f = refit(fit, np.union1d(members, [first]))
+        if f is None:
+            continue
+        m = np.union1d(members, [first])
+        left = cand[cand != first]
+        while left.size:
+            rl = np.abs(residuals(f.kind, f.params, data.take(left), f.free_side))
+            for c in left[np.argsort(rl)][:3]:  # the nearest few: farther ones fit worse
+                g = refit(f, np.union1d(m, [c]))
+                if g is not None:
+                    f, m = g, np.union1d(m, [c])
+                    left = left[left != c]
+                    break
+            else:
+                break
+        if len(m) > len(best_members) or (len(m) == len(best_members) and best_fit is not fit
+                                         and _rms_dof(f) < _rms_dof(best_fit)):
+            best_fit, best_members = f, m
+    if len(best_members) - len(members) < min_new:
+        return fit, members
+    return best_fit, best_members
+
+
 def segment(
     data: FitData,
     kinds: tuple[str, ...] | list[str] | None = None,
