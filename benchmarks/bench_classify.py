@@ -1,7 +1,7 @@
 """Contact detection and tip/link classification accuracy on every bundled scenario.
 
 Run: ``.venv/bin/python benchmarks/bench_classify.py [--seeds 3] [--duration SECONDS]
-[--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar] [--list]``
+[--B 0.01 0.02 0.04] [--scenarios lab_circle paper_planar] [--list] [--refine]``
 
 For every scenario × seed the run is simulated in process; for every B the contacts are
 classified offline (whole-run map) and causally (map up to each contact).  Columns:
@@ -11,7 +11,10 @@ classified offline (whole-run map) and causally (map up to each contact).  Colum
 * ``lab%``: tip/link labels that agree with the truth among the contacts labelled (not
   ambiguous), offline; ``amb%``: ambiguous fraction, offline; ``lab%c``/``amb%c``: causal;
 * ``|P-T| off`` / ``|P-T| cau``: mean |P_T − truth| (truth 1 for tip/joint, 0 for body);
-* ``s``: seconds spent in detection + classification (both modes), summed over the seeds.
+* ``s``: seconds spent in detection + classification (both modes), summed over the seeds;
+* with ``--refine`` (one reconstruction per run and B): ``link%m`` the links refined by the
+  fitted map (``link_by_map``: where the joint signals could not tell the links of a rigid
+  group apart), ``lab%m`` / ``amb%m`` the labels refined by it (``label_map``).
 
 ``--list`` also prints every detection whose link differs from its true contact's (time,
 detected link, true link, kind and fraction along the link, the held joints and the torque
@@ -31,7 +34,8 @@ from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
 
 def refined(run, B):
-    """Counts of the map-refined labels of one run at one B (a whole reconstruction)."""
+    """Counts of the map-refined labels and links of one run at one B (a whole
+    reconstruction)."""
     import warnings
 
     from wholearm_tools.pipeline import reconstruct
@@ -41,7 +45,8 @@ def refined(run, B):
         warnings.simplefilter("ignore")
         cm = score(reconstruct(run, B=B)).classification_map
     conf = cm.confusion
-    return {"map_right": int(conf[0, 0] + conf[1, 1]), "map_decided": int(conf[:, :2].sum()),
+    return {"map_link_ok": cm.link_correct,
+            "map_right": int(conf[0, 0] + conf[1, 1]), "map_decided": int(conf[:, :2].sum()),
             "map_amb": int(conf[:, 2].sum()), "map_matched": int(conf.sum())}
 
 
@@ -107,7 +112,7 @@ def main() -> None:
     names = args.scenarios or list_scenarios()
     head = (f"{'scenario':<14} {'B':>5} {'det':>9} {'link%':>6} {'lab%':>6} {'amb%':>5} "
             f"{'lab%c':>6} {'amb%c':>5} {'|P-T| off':>9} {'|P-T| cau':>9} {'s':>5}"
-            + (f" {'lab%m':>6} {'amb%m':>5}" if args.refine else ""))
+            + (f" {'link%m':>6} {'lab%m':>6} {'amb%m':>5}" if args.refine else ""))
     print(head)
     print("-" * len(head))
     total: dict[float, dict[str, float]] = {}
@@ -144,7 +149,8 @@ def _line(name: str, B: float, a: dict[str, float]) -> str:
             f"{_pct(a['label_ok_cau'], a['labelled_cau'])} "
             f"{100 * a['amb_cau'] / matched:5.1f} "
             f"{a['err_off'] / matched:>9.3f} {a['err_cau'] / matched:>9.3f} {a['secs']:>5.1f}"
-            + (f" {_pct(a['map_right'], a['map_decided'])} "
+            + (f" {_pct(a['map_link_ok'], max(a['n_det'], a['n_true']))} "
+               f"{_pct(a['map_right'], a['map_decided'])} "
                f"{100 * a['map_amb'] / max(a['map_matched'], 1):5.1f}" if "map_right" in a
                else ""))
 

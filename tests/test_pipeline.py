@@ -433,9 +433,31 @@ def test_a_post_touched_along_one_side_is_completed_by_its_other_contacts():
     rec = reconstruct(sc.simulate(seed=0, duration=90.0).run, B=float(sc.hints["B"]))
     ev = evaluate(rec)
     posts = [a for a in ev.primitives if a.kind == "cylinder"]
-    assert len(posts) == 1 and posts[0].type_correct
+    assert len(posts) == 1
+    assert posts[0].type_correct
     assert posts[0].size_error_pct < 0.1
     assert posts[0].surface_rms < 1e-4
     for a in ev.primitives:
         assert a.type_correct, a.kind
     assert any("took" in m and "unexplained contacts" in m for m in rec.messages)
+
+
+def test_the_fitted_bore_tells_which_link_of_a_rigid_group_touched_it():
+    """well_junction seed 0: contact 26 is the well arm's 3 cm roll link's end sphere pressed
+    into the main bore, which the joint torques cannot tell from link 1's leading edge, and
+    the swept map gives link 1 two to one.  Link 1 then stands 13 mm off the fitted bore while
+    the roll link's end sphere touches it: link_by_map puts it right, and every contact's
+    refined link is its true one."""
+    from wholearm_tools.contacts import match_truth
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    sc = load_scenario("well_junction")
+    res = sc.simulate(seed=0)
+    rec = reconstruct(res.run, B=float(sc.hints["B"]))
+    m = match_truth(rec.contacts, res.truth)
+    ok = m >= 0
+    true_link = np.asarray(res.truth.contact_link)[m[ok]]
+    assert np.sum(rec.table.link[ok] != true_link) == 1  # the signals' one miss
+    assert np.array_equal(rec.table.link_by_map[ok], true_link)
+    assert np.flatnonzero(rec.table.link_by_map != rec.table.link).tolist() == [26]

@@ -12,7 +12,9 @@ an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_
 ``primitive`` (id of the primitive that explains it, -1 none, empty before fitting),
 ``residual`` [m] (distance to that primitive minus the radius), ``p_tip_map`` / ``label_map``
 (the tip probability and label refined by the fitted map, see
-:mod:`wholearm_tools.classify.refine`; empty before fitting).
+:mod:`wholearm_tools.classify.refine`; empty before fitting), ``link_by_map`` (the link the
+fitted map supports where the joint signals could not tell the links of a rigid group apart;
+``link`` elsewhere, empty before fitting).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ class ContactTable:
     residual : (M,) float, NaN where unexplained
     p_tip_map : (M,) float, tip probability refined by the fitted map (NaN before fitting)
     label_map : (M,) str, its label (empty before fitting)
+    link_by_map : (M,) int, the link refined by the fitted map (-1 before fitting)
     """
 
     t: FloatArray
@@ -68,9 +71,12 @@ class ContactTable:
     residual: FloatArray
     p_tip_map: FloatArray | None = None
     label_map: NDArray[np.str_] | None = None
+    link_by_map: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         m = np.asarray(self.t).reshape(-1).shape[0]
+        if self.link_by_map is None:
+            object.__setattr__(self, "link_by_map", np.full(m, -1, dtype=np.int64))
         if self.p_tip_map is None:
             object.__setattr__(self, "p_tip_map", np.full(m, np.nan))
         if self.label_map is None:
@@ -85,7 +91,7 @@ class ContactTable:
                 "tip_radius": (float, (m,)), "seg_a": (float, (m, d)), "seg_b": (float, (m, d)),
                 "link_radius": (float, (m,)), "primitive": (np.int64, (m,)),
                 "residual": (float, (m,)), "p_tip_map": (float, (m,)),
-                "label_map": (np.str_, (m,))}
+                "label_map": (np.str_, (m,)), "link_by_map": (np.int64, (m,))}
         for name, (dtype, shape) in spec.items():
             arr = _ro(getattr(self, name), dtype)
             if arr.size == 0 and 0 in shape:
@@ -103,6 +109,8 @@ class ContactTable:
         bad = set(self.label_map.tolist()) - {*LABELS, ""}
         if bad:
             raise InputError(f"unknown label_map values {sorted(bad)}; expected {LABELS}")
+        if np.any(self.link < 0) or np.any(self.link_by_map < -1):
+            raise InputError("contact links must be >= 0")
         pm = self.p_tip_map[np.isfinite(self.p_tip_map)]
         if np.any((pm < 0) | (pm > 1)):
             raise InputError("p_tip_map must lie in [0, 1]")
@@ -122,10 +130,12 @@ class ContactTable:
         """A copy with the fit's per-contact primitive ids and residuals."""
         return replace(self, primitive=primitive, residual=residual)
 
-    def with_map_classification(self, p_tip_map: FloatArray, label_map: NDArray[np.str_]
-                                ) -> ContactTable:
-        """A copy with the tip probabilities and labels refined by the fitted map."""
-        return replace(self, p_tip_map=p_tip_map, label_map=label_map)
+    def with_map_classification(self, p_tip_map: FloatArray, label_map: NDArray[np.str_],
+                                link_by_map: NDArray[np.int64] | None = None) -> ContactTable:
+        """A copy with the tip probabilities, labels and links refined by the fitted map
+        (``link_by_map`` defaults to ``link``)."""
+        return replace(self, p_tip_map=p_tip_map, label_map=label_map,
+                       link_by_map=self.link if link_by_map is None else link_by_map)
 
     # ------------------------------------------------------------------ CSV
     def rows(self) -> tuple[list[str], list[dict[str, str]]]:
@@ -134,7 +144,7 @@ class ContactTable:
         header = ["t", "link", "p_tip", "label", "variance", "used_as",
                   *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
                   *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual",
-                  "p_tip_map", "label_map"]
+                  "p_tip_map", "label_map", "link_by_map"]
         rows = []
         for i in range(len(self)):
             residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
@@ -147,6 +157,7 @@ class ContactTable:
                 *[f"{v:.9g}" for v in self.seg_a[i]], *[f"{v:.9g}" for v in self.seg_b[i]],
                 f"{self.link_radius[i]:.9g}", str(int(self.primitive[i])), residual,
                 p_map, str(self.label_map[i]),
+                str(int(self.link_by_map[i])) if self.link_by_map[i] >= 0 else "",
             ]
             rows.append(dict(zip(header, cells, strict=True)))
         return header, rows
@@ -206,6 +217,7 @@ class ContactTable:
                 primitive=np.array([int(r.get("primitive") or -1) for r in rows]),
                 residual=optional("residual"), p_tip_map=optional("p_tip_map"),
                 label_map=np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
+                link_by_map=np.array([int(r.get("link_by_map") or -1) for r in rows]),
             )
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None

@@ -236,6 +236,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
               sweep: Any = None, base: NDArray | None = None, workers: int | None = None,
+              candidates: LinkCandidates | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
 
@@ -244,7 +245,9 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     ``sweep`` (:func:`robot_sweep`) rules out primitives the robot's own motion cut through,
     ``base`` (the robot's base point) circles and spheres with free space inside that do not
     hold it.  ``workers``: processes for the seed fits (None: every core, at most 8; the map
-    does not depend on it).
+    does not depend on it).  ``candidates`` (:func:`link_candidates`): the links each contact
+    may have been on when the joint signals left it open, weighed by the fitted map into the
+    table's ``link_by_map`` (without: the detected link).
     Poor data never raise: the map is then empty (or short) and ``messages`` say why.
     """
     from wholearm_tools.fit.segment import seed_pool
@@ -252,13 +255,15 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     with seed_pool(workers) as pool:
         return _fit_table(table, planar=planar, B=B, kinds=kinds, loss=loss, noise=noise,
                           free_points=free_points, meta=meta, noise_floor=noise_floor,
-                          merge_duplicates=merge_duplicates, sweep=sweep, base=base, pool=pool)
+                          merge_duplicates=merge_duplicates, sweep=sweep, base=base, pool=pool,
+                          candidates=candidates)
 
 
 def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None,
                loss: str, noise: float | None, free_points: NDArray | None,
                meta: dict[str, Any] | None, noise_floor: float, merge_duplicates: bool,
                sweep: Any, base: NDArray | None, pool: Executor | None,
+               candidates: LinkCandidates | None = None,
                ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     from wholearm_tools.fit import crossing, fit_primitive, segment
     from wholearm_tools.fit.core import sweep_tolerance
@@ -452,24 +457,84 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     surface_map = SurfaceMap(planar=planar, B=float(B), primitives=tuple(primitives),
                              contacts=counts, unexplained=unexplained, meta=dict(meta or {}))
     table = table.with_assignment(assignment, residual)
-    table = _refine_classification(table, surfaces, float(B))
+    table = _refine_classification(table, surfaces, float(B), candidates)
+    moved = np.flatnonzero(table.link_by_map != table.link)
+    if len(moved):
+        messages.append(f"{len(moved)} contact(s) put on another link of their rigid group: "
+                        "the fitted map holds only that link's reading (link_by_map)")
     surface_map = dataclasses.replace(surface_map, contacts={
         **surface_map.contacts, **{f"{k}_map": int(np.sum(table.label_map == k))
                                    for k in ("tip", "link", "ambiguous")}})
     return surface_map, tuple(fits), table, tuple(messages)
 
 
-def _refine_classification(table: ContactTable, surfaces: list[Any], B: float
-                           ) -> ContactTable:
+def _refine_classification(table: ContactTable, surfaces: list[Any], B: float,
+                           candidates: LinkCandidates | None = None) -> ContactTable:
     """The table with ``p_tip_map`` / ``label_map``: eq. (2) refined by the fitted surfaces
     (:func:`wholearm_tools.classify.refine.refine_with_map`), labelled with the classifier's
-    thresholds."""
+    thresholds; and with ``link_by_map``: of the ``candidates`` links of a contact, the one
+    whose reading the fitted map supports best (the link's prior share times its two
+    hypotheses' likelihoods, :func:`wholearm_tools.classify.refine.link_evidence`).  A
+    contact put on another link gets that link's tip probability (eq. (2) was not evaluated
+    for it: prior 0.5)."""
+    from wholearm_tools.classify.refine import link_evidence
     from wholearm_tools.classify.tip import labels_from_p_tip
 
+    kw = {"support_radius": max(0.1, 5.0 * B)}
     p_map = refine_with_map(table.p_tip, table.tip_center, table.tip_radius, table.seg_a,
-                            table.seg_b, table.link_radius, surfaces,
-                            support_radius=max(0.1, 5.0 * B))
-    return table.with_map_classification(p_map, labels_from_p_tip(p_map))
+                            table.seg_b, table.link_radius, surfaces, **kw)
+    link_map = table.link.copy()
+    if candidates is not None and len(candidates.contact) and surfaces:
+        c = candidates
+        own = c.link == table.link[c.contact]
+        delta = 0.5 * np.linalg.norm(table.seg_b - table.seg_a, axis=1)
+        post, p_rows = link_evidence(
+            c.contact, c.prior, np.where(own, table.p_tip[c.contact], 0.5), c.tip_center,
+            c.tip_radius, c.seg_a, c.seg_b, c.link_radius,
+            1.0 / np.maximum(delta[c.contact], 1e-6), surfaces, **kw)
+        for i in np.unique(c.contact):
+            rows = np.flatnonzero(c.contact == i)
+            best = rows[np.argmax(post[rows])]
+            if not own[best]:
+                link_map[i] = c.link[best]
+                p_map[i] = p_rows[best]
+    return table.with_map_classification(p_map, labels_from_p_tip(p_map), link_map)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LinkCandidates:
+    """The links a contact may have been on where the joint signals cannot tell (a rigid
+    group), one row per (contact, link): ``contact`` (R,) table row, ``link`` (R,), ``prior``
+    (R,) the link's share from the signals and the swept map, and the link's geometry at the
+    contact as in :class:`ContactTable` (``tip_center``, ``tip_radius``, ``seg_a``, ``seg_b``,
+    ``link_radius``)."""
+
+    contact: NDArray[np.int64]
+    link: NDArray[np.int64]
+    prior: NDArray[np.float64]
+    tip_center: NDArray[np.float64]
+    tip_radius: NDArray[np.float64]
+    seg_a: NDArray[np.float64]
+    seg_b: NDArray[np.float64]
+    link_radius: NDArray[np.float64]
+
+
+def link_candidates(robot: RobotModel, contacts: Any) -> LinkCandidates:
+    """Every link with a non-zero ``contacts.link_prior`` of the contacts that have more than
+    one, with its geometry at the contact configuration (see :func:`contact_table`)."""
+    prior = np.asarray(contacts.link_prior, dtype=float).reshape(len(contacts), -1)
+    open_ = (prior > 0).sum(axis=1) > 1
+    contact, link = np.nonzero((prior > 0) & open_[:, None])
+    dim = robot.dim
+    pts = (robot.joint_positions(contacts.q[contact]) if len(contact)
+           else np.zeros((0, robot.dof + 1, 3)))
+    rows = np.arange(len(contact))
+    return LinkCandidates(
+        contact=contact.astype(np.int64), link=link.astype(np.int64),
+        prior=prior[contact, link], tip_center=pts[rows, link + 1, :dim],
+        tip_radius=np.array([robot.contact_radius(int(k), tip=True) for k in link]),
+        seg_a=pts[rows, link, :dim], seg_b=pts[rows, link + 1, :dim],
+        link_radius=robot.link_radii[link] if len(link) else np.zeros(0))
 
 
 #: identifiability noise (fraction of the scene size) a *reported* primitive must be determined
@@ -727,7 +792,8 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
             sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None,
-            base=run.robot.base, workers=params.workers)
+            base=run.robot.base, workers=params.workers,
+            candidates=link_candidates(run.robot, contacts))
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

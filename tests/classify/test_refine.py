@@ -107,3 +107,30 @@ def test_a_link_resting_on_the_lip_between_two_bores_is_a_link_contact():
     assert refine_with_map(np.array([0.5]), **c, surfaces=surfaces)[0] < 0.05
     # either bore alone cannot explain it: the link crosses its infinite circle at the window
     assert refine_with_map(np.array([0.5]), **c, surfaces=surfaces[:1])[0] == pytest.approx(0.5)
+
+
+def test_the_map_puts_a_contact_on_the_link_whose_reading_touches_it():
+    """A rigid group: links 1 (0.3 m, ending at x = 0) and 2 (a 3 cm stub beyond it) moved as
+    one, and the signals gave link 1 two to one.  Link 2's end sphere touches the fitted wall
+    and link 1's does not (3 cm off): the map puts the contact on link 2, a tip reading.  With
+    the wall out of reach of both, the prior stands."""
+    from wholearm_tools.classify.refine import link_evidence
+
+    def rows(y_end):  # link 1 from (-0.3, y_end) to (0, y_end), link 2 on to (0.03, y_end)
+        return {"tip_center": np.array([[0.0, y_end], [0.03, y_end + 0.03]]),
+                "tip_radius": np.array([0.02, 0.02]),
+                "seg_a": np.array([[-0.3, y_end], [0.0, y_end]]),
+                "seg_b": np.array([[0.0, y_end], [0.03, y_end + 0.03]]),
+                "link_radius": np.array([0.01, 0.01])}
+
+    prior = np.array([2 / 3, 1 / 3])
+    floor = np.full(2, 1 / 0.15)  # the detected link's 1 / Delta for both rows
+    touching = rows(0.5 - 0.02 - 0.03 - 0.0001)  # link 2's sphere 0.1 mm from y = 0.5
+    post, p_map = link_evidence(np.array([0, 0]), prior, np.array([0.3, 0.5]), floor=floor,
+                                surfaces=SURF, **touching)
+    assert post[1] > 0.9
+    assert post.sum() == pytest.approx(1.0)
+    assert p_map[1] > 0.95
+    post, _ = link_evidence(np.array([0, 0]), prior, np.array([0.3, 0.5]), floor=floor,
+                            surfaces=SURF, **rows(0.1))
+    assert post == pytest.approx(prior)

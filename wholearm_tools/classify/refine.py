@@ -82,23 +82,50 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
     """
     p = np.asarray(p_tip, dtype=float).reshape(-1)
     m = p.shape[0]
-    P = np.asarray(tip_center, dtype=float).reshape(m, -1)
-    a = np.asarray(seg_a, dtype=float).reshape(m, -1)
-    b = np.asarray(seg_b, dtype=float).reshape(m, -1)
-    wt = np.asarray(tip_radius, dtype=float).reshape(m)
-    wl = np.asarray(link_radius, dtype=float).reshape(m)
     if not (support_radius > 0 and cut_radius > 0 and penetration > 0):
         raise InputError("support_radius, cut_radius and penetration must be positive, got "
                          f"{support_radius}, {cut_radius}, {penetration}")
     if m == 0 or not surfaces:
         return p.copy()
-    delta = np.maximum(0.5 * np.linalg.norm(b - a, axis=1), 1e-6)
-    floor = 1.0 / delta
+    lt, ll = hypothesis_likelihoods(tip_center, tip_radius, seg_a, seg_b, link_radius,
+                                    surfaces, support_radius=support_radius,
+                                    cut_radius=cut_radius, penetration=penetration)
+    return _posterior_tip(p, lt, ll)
+
+
+def _posterior_tip(p: FloatArray, lt: FloatArray, ll: FloatArray) -> FloatArray:
+    num = p * lt
+    den = num + (1 - p) * ll
+    out = np.where(den > 0, num / np.where(den > 0, den, 1.0), p)
+    # one and the same point (sharp tip at the end of its link): nothing to tell apart
+    same = np.isclose(lt, ll, rtol=1e-9, atol=0.0)
+    return np.clip(np.where(same, p, out), 0.0, 1.0)
+
+
+def hypothesis_likelihoods(tip_center: FloatArray, tip_radius: FloatArray, seg_a: FloatArray,
+                           seg_b: FloatArray, link_radius: FloatArray,
+                           surfaces: Sequence[MapSurface], *, support_radius: float = 0.1,
+                           cut_radius: float = 0.015, penetration: float = 3.0,
+                           floor: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """``(L_T, L_L)``: the likelihood of the tip (outer sphere) and of the link-side hypothesis
+    of ``M`` contacts given the fitted surfaces, floor ``1 / Delta`` included and zero where
+    the other part of the link would cut into a surface (module docstring; the arguments are
+    those of :func:`refine_with_map`).  ``floor`` overrides ``1 / Delta`` per contact."""
+    P = np.asarray(tip_center, dtype=float)
+    m = P.shape[0]
+    P = P.reshape(m, -1)
+    a = np.asarray(seg_a, dtype=float).reshape(m, -1)
+    b = np.asarray(seg_b, dtype=float).reshape(m, -1)
+    wt = np.asarray(tip_radius, dtype=float).reshape(m)
+    wl = np.asarray(link_radius, dtype=float).reshape(m)
+    if floor is None:
+        floor = 1.0 / np.maximum(0.5 * np.linalg.norm(b - a, axis=1), 1e-6)
+    floor = np.asarray(floor, dtype=float).reshape(m)
     like_t = np.zeros(m)
     like_l = np.zeros(m)
     ok_t = np.ones(m, dtype=bool)
     ok_l = np.ones(m, dtype=bool)
-    for view in _views(surfaces):
+    for view in _views(surfaces) if m else ():
         sig = view.sigma
         clear_tip = view.clearance(P) - wt
         clear_seg, t = view.segment_clearance(a, b)
@@ -125,14 +152,39 @@ def refine_with_map(p_tip: FloatArray, tip_center: FloatArray, tip_radius: Float
         like_l = np.maximum(like_l, np.where(near_l & side,
                                              gauss * np.exp(-0.5 * (clear_link / sig) ** 2),
                                              0.0))
-    lt = (like_t + floor) * ok_t
-    ll = (like_l + floor) * ok_l
-    num = p * lt
-    den = num + (1 - p) * ll
-    out = np.where(den > 0, num / np.where(den > 0, den, 1.0), p)
-    # one and the same point (sharp tip at the end of its link): nothing to tell apart
-    same = np.isclose(lt, ll, rtol=1e-9, atol=0.0)
-    return np.clip(np.where(same, p, out), 0.0, 1.0)
+    return (like_t + floor) * ok_t, (like_l + floor) * ok_l
+
+
+def link_evidence(contact: NDArray[np.int64], prior: FloatArray, p_tip: FloatArray,
+                  tip_center: FloatArray, tip_radius: FloatArray, seg_a: FloatArray,
+                  seg_b: FloatArray, link_radius: FloatArray, floor: FloatArray,
+                  surfaces: Sequence[MapSurface], **kwargs: float
+                  ) -> tuple[FloatArray, FloatArray]:
+    """The fitted map's say on *which link* made a contact the joint signals left open.
+
+    Each of ``R`` rows is one candidate link of contact ``contact[r]``, with its prior
+    ``prior[r]`` (the link's share from the signals and the swept map), the tip probability
+    of its two hypotheses ``p_tip[r]`` and its geometry at the contact (arguments of
+    :func:`refine_with_map`).  The evidence of a candidate is
+    ``prior (P_T L_T + (1 - P_T) L_L)``; ``floor`` (per row) must be the same for every row of
+    one contact, so that a contact no surface speaks for keeps its prior.
+
+    Returns ``(post, p_map)``: each row's posterior among its contact's rows, and its map
+    refined tip probability.
+    """
+    contact = np.asarray(contact, dtype=np.int64).reshape(-1)
+    r = contact.shape[0]
+    prior = np.asarray(prior, dtype=float).reshape(r)
+    p = np.asarray(p_tip, dtype=float).reshape(r)
+    if r == 0 or not surfaces:
+        post = prior / np.maximum(np.bincount(contact, prior)[contact], 1e-300) if r else prior
+        return post, p.copy()
+    lt, ll = hypothesis_likelihoods(tip_center, tip_radius, seg_a, seg_b, link_radius,
+                                    surfaces, floor=floor, **kwargs)
+    ev = prior * (p * lt + (1 - p) * ll)
+    total = np.bincount(contact, ev)[contact]
+    post = np.where(total > 0, ev / np.where(total > 0, total, 1.0), prior)
+    return post, _posterior_tip(p, lt, ll)
 
 
 def _support_distance(prim: object, x: FloatArray, support: FloatArray) -> FloatArray:

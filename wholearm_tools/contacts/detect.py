@@ -149,6 +149,12 @@ class Contacts:
     held : (M, n) bool
         Joints at rest and unloaded just before the stop (not driven by this move): their
         torque at the stop is the contact force's moment alone.  All False when unknown.
+    link_prior : (M, n) float
+        Probability of each link having made the contact, from the signals and the swept map
+        alone: one-hot at ``link`` unless the joints could not tell the links of a rigid group
+        apart (then each one's share of eq. (2)'s admissible mass, see ``_choose_rigid``).
+        The fitted map refines it (:func:`wholearm_tools.pipeline.reconstruct`, column
+        ``link_by_map`` of contacts.csv).  One-hot at ``link`` when not given.
     """
 
     t: FloatArray
@@ -162,6 +168,7 @@ class Contacts:
     meta: dict[str, Any] = field(default_factory=dict)
     tau_peak: FloatArray | None = None
     held: NDArray[np.bool_] | None = None
+    link_prior: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = np.asarray(self.velocity_threshold).shape[0]
@@ -186,6 +193,16 @@ class Contacts:
             object.__setattr__(self, name, arr)
         if np.any((self.link < 0) | (self.link >= n)):
             raise InputError(f"contact links must be in 0..{n - 1}, got {self.link.tolist()}")
+        if self.link_prior is None:
+            object.__setattr__(self, "link_prior", _frozen(np.eye(n)[self.link] if m
+                                                           else np.zeros((0, n))))
+        else:
+            prior = _frozen(self.link_prior) if m else _frozen(np.zeros((0, n)))
+            if prior.shape != (m, n):
+                raise InputError(f"expected link_prior of shape ({m}, {n}), got {prior.shape}")
+            if m and not (np.all(prior >= 0) and np.allclose(prior.sum(axis=1), 1.0)):
+                raise InputError("link_prior rows must be probabilities summing to 1")
+            object.__setattr__(self, "link_prior", prior)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -200,7 +217,8 @@ class Contacts:
         return Contacts(self.t[sel], self.link[sel], self.index[sel], self.q[sel],
                         self.qd_before[sel], self.t_end[sel], self.velocity_threshold,
                         self.torque_threshold, dict(self.meta),
-                        tau_peak=self.tau_peak[sel], held=self.held[sel])
+                        tau_peak=self.tau_peak[sel], held=self.held[sel],
+                        link_prior=self.link_prior[sel])
 
 
 # --------------------------------------------------------------------------- noise estimation
@@ -374,7 +392,7 @@ def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
 def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
                   tau: FloatArray, held: NDArray[np.bool_], tau_tol: FloatArray,
                   groups: list[tuple[int, int]], B: float, force_angle: float = 20.0,
-                  ) -> list[int]:
+                  ) -> tuple[list[int], FloatArray]:
     """Link of each rigid group ``lo..hi`` that most likely touched, from geometry, the map and
     the loads on the held joints.
 
@@ -391,8 +409,10 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
 
     ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
     the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of
-    each group; the torque-identified link ``lo`` when no candidate keeps any admissible
-    boundary.
+    each group (the torque-identified link ``lo`` when no candidate keeps any admissible
+    boundary) and ``(G, n)`` each link's share of the group's admissible mass (one-hot at the
+    chosen link when none has any): the prior the fitted map later weighs the links with
+    (:func:`wholearm_tools.classify.refine.link_evidence`).
     """
     from wholearm_tools.classify.swept import swept_map
     from wholearm_tools.classify.tip import ClassifyParams, _boundary
@@ -407,10 +427,16 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
                                    one_force=True)
     mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
     out = []
+    share = np.zeros((len(groups), q.shape[1]))
     for g, (lo, _hi) in enumerate(groups):
         sel = rows == g
-        out.append(int(cand[sel][np.argmax(mass[sel])]) if np.any(mass[sel] > 0) else lo)
-    return out
+        if np.any(mass[sel] > 0):
+            out.append(int(cand[sel][np.argmax(mass[sel])]))
+            share[g, cand[sel]] = mass[sel] / mass[sel].sum()
+        else:
+            out.append(lo)
+            share[g, lo] = 1.0
+    return out, share
 
 
 def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
@@ -810,11 +836,13 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         settle = q[s:min(s + min_len, e)]
         out_q[i, :link + 1] = np.median(settle[:, :link + 1], axis=0)
     links = np.array([r[2] for r in rows])
+    prior = np.eye(n)[links]
     if params.rigid_outer and params.rigid_choice == "map" and robot is not None:
         which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
         if which:
             groups = [(inner[rows[i][0]], rows[i][2]) for i in which]
-            links[which] = _choose_rigid(robot, q, out_q[which], out_qd[which], peak[which],
-                                         held[which], tau_th, groups, params.rigid_dilation)
+            links[which], prior[which] = _choose_rigid(
+                robot, q, out_q[which], out_qd[which], peak[which], held[which], tau_th,
+                groups, params.rigid_dilation)
     return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta,
-                    tau_peak=peak, held=held)
+                    tau_peak=peak, held=held, link_prior=prior)

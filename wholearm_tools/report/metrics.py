@@ -538,6 +538,8 @@ def evaluate(rec: Any, *, max_lag: float = 0.1, lead: float = 0.005,
     label_map = np.asarray(getattr(table, "label_map", np.zeros(0))).astype(str)
     if (len(label_map) and len(label_map) == len(table.t) and np.all(label_map != "")
             and np.all(np.isfinite(table.p_tip_map))):
-        cls_map = classification_metrics(table.t, table.link, table.p_tip_map, label_map,
-                                         truth, max_lag=max_lag, lead=lead)
+        link_map = np.asarray(getattr(table, "link_by_map", table.link))
+        cls_map = classification_metrics(table.t, np.where(link_map >= 0, link_map, table.link),
+                                         table.p_tip_map, label_map, truth, max_lag=max_lag,
+                                         lead=lead)
     return AccuracyReport(cls, tuple(accs), recovery, cls_map)
