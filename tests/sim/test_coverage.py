@@ -86,6 +86,32 @@ def test_frontier_unhook_puts_joints_back_outermost_first() -> None:
     np.testing.assert_allclose(third, home)
 
 
+def test_frontier_vary_return_takes_another_posture_where_a_return_was_blocked() -> None:
+    """A home return blocked at one place makes the same contact every time it is retried;
+    with vary_return the step whose path runs through that place gets another posture for the
+    joints it would leave at home, and a path clear of it stays the plain return."""
+    from wholearm_tools.sim.collision import Collider
+    from wholearm_tools.sim.occupancy import SweptGrid
+    from wholearm_tools.sim.strategies import make_strategy
+
+    sc = load_scenario("paper_planar")
+    strat = make_strategy("frontier", sc.robot, Collider(sc.robot, sc.obstacles),
+                          SweptGrid(sc.robot), rng=0, home_every=1, unhook=True,
+                          vary_return=True)
+    home = sc.home.copy()
+    strat.home = home
+    q = home + np.array([0.8, 0.0, 0.0])  # only the base is off home: one return step
+    first = strat.next_target(q)
+    np.testing.assert_allclose(first, home)
+    stop = home + np.array([0.4, 0.0, 0.0])  # blocked half-way
+    strat.observe(np.array([q, stop]), np.array([stop]))
+    again = strat.next_target(stop + np.array([0.3, 0.0, 0.0]))  # back out, home again
+    assert again[0] == home[0]
+    assert np.max(np.abs(again[1:] - home[1:])) > 0.01  # another posture past the block
+    clear = strat.next_target(home + np.array([-0.8, 0.0, 0.0]))  # the other side: clear
+    np.testing.assert_allclose(clear, home)
+
+
 def test_paper_planar_default_run_touches_every_surface() -> None:
     covs, kinds = _default_run_coverage("paper_planar")  # 180 s, seed 0
     assert len(covs) == 6

@@ -245,6 +245,12 @@ class FrontierStrategy(NoveltyStrategy):
     fallback is scored the same way: the arm spends fewer moves where it has already been
     stopped many times and more on the surfaces it has touched little (balancing from its own
     contact history; ``crowd`` = 0 keeps the original behaviour and random draws).
+    With ``vary_return``, a home-return step whose joint-space path passes within 0.1 rad of
+    a configuration where an earlier return step was blocked puts the joints it would leave at
+    home to a random posture around it instead (normal, ``vary_scale`` rad): a return blocked
+    by the same obstacle at the same place makes the same contact every time (paper_spatial
+    seed 0, 180 s: seven of the sphere's eleven contacts are one configuration, the base yaw
+    swinging home into it), while another posture passes it or touches it elsewhere.
     Nothing here reads the environment: frontier cells come from
     the swept map and the blocked moves (``observe``), i.e. the robot's own motion history.
     """
@@ -256,8 +262,13 @@ class FrontierStrategy(NoveltyStrategy):
                  overshoot: float = 0.05, goals: int = 6, unhook: bool = False,
                  follow: float = 0.0, follow_step: float = 0.25, follow_max: int = 4,
                  follow_radius: float = 0.08, follow_density: int = 5, crowd: float = 0.0,
-                 crowd_radius: float = 0.1, **kwargs: Any) -> None:
+                 crowd_radius: float = 0.1, vary_return: bool = False,
+                 vary_scale: float = 0.4, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.vary_return = bool(vary_return)
+        self.vary_scale = float(vary_scale)
+        self._returning = False  # the last target was a home-return step
+        self._return_blocks: list[FloatArray] = []  # where return steps were blocked
         self.crowd = float(crowd)
         self.crowd_radius = float(crowd_radius)
         self.follow = float(follow)
@@ -290,6 +301,8 @@ class FrontierStrategy(NoveltyStrategy):
     def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:
         super().observe(swept, attempted)
         self._blocked = None if attempted is None or not len(attempted) else attempted[0].copy()
+        if self._returning and self._blocked is not None:
+            self._return_blocks.append(self._blocked)
         if attempted is not None and len(attempted):
             # the arm was blocked at attempted[0]: remember where its tip was, and count the
             # cells around it as tried (most blocks are tip contacts)
@@ -395,15 +408,32 @@ class FrontierStrategy(NoveltyStrategy):
         far += self.rng.uniform(0.0, 0.5 * self.grid.cell, size=far.shape)
         return cand[int(np.argmax(far))]
 
+    def _blocked_before(self, q: FloatArray, target: FloatArray, tol: float = 0.1) -> bool:
+        """The straight joint-space path ``q`` → ``target`` passes within ``tol`` rad of a
+        configuration where an earlier home-return step was blocked."""
+        if not self._return_blocks:
+            return False
+        path = q + np.linspace(0.0, 1.0, 25)[:, None] * (target - q)
+        blocks = np.array(self._return_blocks)
+        d = np.linalg.norm(path[:, None, :] - blocks[None], axis=2)
+        return bool(d.min() < tol)
+
     # ------------------------------------------------------------------ strategy
     def next_target(self, q: FloatArray) -> FloatArray | None:
         if self.home is None:
             self.home = q.copy()
+        self._returning = False
         while self._unhook_joints:
             j = self._unhook_joints.pop(0)
             target = q.copy()
             target[j:] = self.home[j:]  # retry outer joints a blocked step left behind
             if np.max(np.abs(target - q)) >= 1e-3:
+                if self.vary_return and self._blocked_before(q, target):
+                    target[j + 1:] = np.clip(
+                        target[j + 1:] + self.rng.normal(0.0, self.vary_scale,
+                                                         target.size - j - 1),
+                        self.lower[j + 1:], self.upper[j + 1:])
+                self._returning = True
                 return target
         self.count += 1
         if (self.home_every > 0 and self.count % self.home_every == 0
