@@ -1,4 +1,4 @@
-"""The robot's sweep crossing a fitted line, circle or plane between its contacts."""
+"""The robot's sweep crossing a fitted line, circle, plane or post between its contacts."""
 
 from __future__ import annotations
 
@@ -96,6 +96,41 @@ def test_a_plane_crossed_inside_its_contacts_hull_goes():
     assert _check("plane", params, support, outside, plane) is None
     # collinear support spans no region
     assert _check("plane", params, support[[0, 4]], inside, plane) is None
+
+
+def test_a_post_the_arm_passed_through_between_its_contacts_goes():
+    """A tilted cylinder (free side outside: a post) held up by link contacts at two places
+    45 cm apart along it; the arm swept through its body in between, which a post does not
+    allow.  Capsules beside it, beyond its axial range or off the arc its contacts cover
+    leave it; a bore (free space inside) is not checked."""
+    from wholearm_tools.geometry import Cylinder
+
+    axis = np.array([0.0, 0.0, 1.0])
+    post = Cylinder([0.0, 0.0, 0.0], axis, 0.07)
+    params = {"point": np.zeros(3), "axis": axis, "radius": 0.07}
+    ang = np.radians([170.0, 180.0, 190.0])
+    ring = np.c_[0.07 * np.cos(ang), 0.07 * np.sin(ang)]
+    support = np.vstack([np.c_[ring, np.zeros(3)], np.c_[ring, np.full(3, 0.45)]])
+    z = np.linspace(0.1, 0.35, 12)
+
+    def through(x0):  # horizontal capsules along y at x = x0, heights z
+        return Sweep(np.c_[np.full(12, x0), np.full(12, -0.3), z],
+                     np.c_[np.full(12, x0), np.full(12, 0.3), z], np.full(12, 0.02))
+
+    def check(sweep, side=1.0, sup=support):
+        feet = cut_feet(post, side, sweep, tol=2e-3)
+        return crossed_between("cylinder", params, sup, feet, need=7, min_span=0.01,
+                               min_cuts=3, free_side=side)
+
+    why = check(through(-0.05))  # through the body, on the contacts' side
+    assert why is not None
+    assert "12 times inside the region its contacts span" in why
+    assert check(through(0.2)) is None  # beside it
+    assert check(through(0.05)) is None  # through the side its contacts do not cover
+    lift = np.array([0.0, 0.0, 0.5])
+    above = Sweep(through(-0.05).a + lift, through(-0.05).b + lift, np.full(12, 0.02))
+    assert check(above) is None  # over its contacts' axial range
+    assert check(through(-0.05), side=-1.0) is None  # a bore: crossed through windows
 
 
 @pytest.mark.parametrize("kind", ["sphere", "cylinder"])

@@ -16,8 +16,13 @@ support:
   flat wall with an opening the arm passed through, touched all round the opening, would go
   too: not seen in the bundled scenarios, documented in docs/method.md.
 
-Other types (sphere, cylinder, cone, torus) are not checked here: a bore's wall is crossed
-through a junction's window, inside the region its contacts surround.
+* a cylinder the robot is outside of (``free_side`` > 0, a post): cuts within the axial
+  range and the arc its support covers rule it out.  A post is solid: the arm goes round it or
+  over its top, never through it (paper_spatial seed 5, 180 s: a tilted cylinder through link
+  contacts on both posts, 45 cm apart, 268 mm RMS from the post it was matched to).
+
+Other types (sphere, cone, torus) and cylinders with free space inside are not checked here: a
+bore's wall is crossed through a junction's window, inside the region its contacts surround.
 """
 
 from __future__ import annotations
@@ -87,7 +92,7 @@ def sweep_objection(kind: str, params: dict[str, Any], primitive: Any, free_side
         return (f"it would enclose the robot's base, yet {100 * share:.0f} % of the robot's "
                 "motion went through it")
     return crossed_between(kind, params, support, feet, need=need, min_span=min_span,
-                           min_cuts=min_cuts)
+                           min_cuts=min_cuts, free_side=free_side)
 
 
 def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray
@@ -111,18 +116,49 @@ def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatAr
     return r * s, r * f[f < span]
 
 
+def _within_post_support(params: dict[str, Any], support: FloatArray, feet: FloatArray
+                         ) -> NDArray[np.bool_]:
+    """Which ``feet`` on a cylinder lie within the axial range of its ``support`` and the
+    arc it covers (outside the largest angular gap between support points)."""
+    from wholearm_tools.fit.models import perp_bases
+
+    p0 = np.asarray(params["point"], dtype=float)
+    a = np.asarray(params["axis"], dtype=float)
+    a = a / np.linalg.norm(a)
+    u, v = perp_bases(a[None])
+    s_sup, s_ft = (support - p0) @ a, (feet - p0) @ a
+    ang_sup = np.mod(np.arctan2((support - p0) @ v[0], (support - p0) @ u[0]), 2 * np.pi)
+    ang_ft = np.mod(np.arctan2((feet - p0) @ v[0], (feet - p0) @ u[0]), 2 * np.pi)
+    order = np.sort(ang_sup)
+    gaps = np.diff(np.concatenate([order, order[:1] + 2 * np.pi]))
+    start = order[(int(np.argmax(gaps)) + 1) % len(order)]
+    span = 2 * np.pi - float(gaps.max())
+    on_arc = np.mod(ang_ft - start, 2 * np.pi) <= span
+    return on_arc & (s_ft >= s_sup.min()) & (s_ft <= s_sup.max())
+
+
 def crossed_between(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray,
-                    *, need: int, min_span: float, min_cuts: int) -> str | None:
+                    *, need: int, min_span: float, min_cuts: int,
+                    free_side: float | None = None) -> str | None:
     """Why the cuts ``feet`` rule the primitive out, or None when they do not.
 
     ``support``: the primitive's support points on its surface ``(S, d)``; ``need`` and
     ``min_span``: the contacts and the length one uncut piece of a curve's support needs;
     ``min_cuts``: fewer cuts inside the support than this are ignored (a capsule grazing the
-    surface within the tolerance on a noisy log).
+    surface within the tolerance on a noisy log); ``free_side``: the primitive's (a cylinder
+    is checked only when it is > 0, a post).
     """
     support = np.asarray(support, dtype=float)
     feet = np.asarray(feet, dtype=float)
-    if kind not in CHECKED or len(support) < 2 or len(feet) == 0:
+    if len(support) < 2 or len(feet) == 0:
+        return None
+    if kind == "cylinder" and free_side is not None and free_side > 0:
+        inside = int(np.count_nonzero(_within_post_support(params, support, feet)))
+        if inside < min_cuts:
+            return None
+        return (f"the robot passed through it {inside} times inside the region its contacts "
+                "span, and its contacts put the robot outside it")
+    if kind not in CHECKED:
         return None
     if kind == "plane":
         from scipy.spatial import Delaunay, QhullError
