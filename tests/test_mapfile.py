@@ -74,7 +74,8 @@ def sample_table(dim: int = 2) -> ContactTable:
         link_radius=np.full(m, 0.01), primitive=np.array([0, 0, 1, -1, 1]),
         residual=np.array([1e-4, -2e-4, 3e-5, np.nan, 0.0]),
         p_tip_map=np.array([0.99, 0.01, np.nan, 0.0, 1.0]),
-        label_map=np.array(["tip", "link", "", "link", "tip"]))
+        label_map=np.array(["tip", "link", "", "link", "tip"]),
+        link_by_map=np.array([0, 2, -1, 0, 1]))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -91,6 +92,7 @@ def test_contact_table_csv_round_trip(tmp_path, dim: int) -> None:
     np.testing.assert_allclose(back.residual, table.residual, equal_nan=True)
     np.testing.assert_allclose(back.p_tip_map, table.p_tip_map, equal_nan=True)
     np.testing.assert_array_equal(back.label_map, table.label_map)
+    np.testing.assert_array_equal(back.link_by_map, table.link_by_map)
 
 
 def test_contact_table_errors(tmp_path) -> None:
@@ -111,3 +113,11 @@ def test_contact_table_errors(tmp_path) -> None:
     path.write_text(sample_table().to_csv().replace(",0.990000,", ",often,", 1))
     with pytest.raises(InputError, match="bad value in column 'p_tip_map'"):
         read_contact_table(path)
+    header, rows = sample_table().rows()
+    for column in ("primitive", "link_by_map"):
+        bad = [dict(r) for r in rows]
+        bad[0][column] = "two"
+        path.write_text(",".join(header) + "\n"
+                        + "\n".join(",".join(r[h] for h in header) for r in bad) + "\n")
+        with pytest.raises(InputError, match=f"bad value in column '{column}'"):
+            read_contact_table(path)

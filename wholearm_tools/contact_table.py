@@ -201,6 +201,14 @@ class ContactTable:
             except (TypeError, ValueError) as exc:
                 raise InputError(f"{source}: bad value in column {name!r} ({exc})") from None
 
+        def optional_int(name: str) -> NDArray[np.int64]:
+            """An integer column that may be absent or empty (-1)."""
+            try:
+                return np.array([int(r[name]) if r.get(name) else -1 for r in rows],
+                                dtype=np.int64)
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"{source}: bad value in column {name!r} ({exc})") from None
+
         def points(prefix: str) -> FloatArray:
             return np.stack([column(f"{prefix}_{c}") for c in axes], axis=1)
 
@@ -214,10 +222,10 @@ class ContactTable:
                 used_as_tip=used == "tip", tip_center=points("tip"),
                 tip_radius=column("tip_radius"), seg_a=points("a"), seg_b=points("b"),
                 link_radius=column("link_radius"),
-                primitive=np.array([int(r.get("primitive") or -1) for r in rows]),
+                primitive=optional_int("primitive"),
                 residual=optional("residual"), p_tip_map=optional("p_tip_map"),
                 label_map=np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
-                link_by_map=np.array([int(r.get("link_by_map") or -1) for r in rows]),
+                link_by_map=optional_int("link_by_map"),
             )
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
