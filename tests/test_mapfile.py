@@ -119,5 +119,6 @@ def test_contact_table_errors(tmp_path) -> None:
         bad[0][column] = "two"
         path.write_text(",".join(header) + "\n"
                         + "\n".join(",".join(r[h] for h in header) for r in bad) + "\n")
-        with pytest.raises(InputError, match=f"bad value in column '{column}'"):
+        with pytest.raises(InputError, match=f"bad value in column '{column}'") as err:
             read_contact_table(path)
+        assert str(err.value).count(str(path)) == 1  # the file named once

@@ -215,18 +215,20 @@ class ContactTable:
         used = column("used_as", str)
         if not set(used.tolist()) <= {"tip", "link"}:
             raise InputError(f"{source}: column 'used_as' must be tip or link")
+        # (the column readers name the file themselves; the table's own checks do not)
+        fields = {
+            "t": column("t"), "link": column("link", int), "p_tip": column("p_tip"),
+            "label": column("label", str), "variance": column("variance"),
+            "used_as_tip": used == "tip", "tip_center": points("tip"),
+            "tip_radius": column("tip_radius"), "seg_a": points("a"), "seg_b": points("b"),
+            "link_radius": column("link_radius"),
+            "primitive": optional_int("primitive"),
+            "residual": optional("residual"), "p_tip_map": optional("p_tip_map"),
+            "label_map": np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
+            "link_by_map": optional_int("link_by_map"),
+        }
         try:
-            return cls(
-                t=column("t"), link=column("link", int), p_tip=column("p_tip"),
-                label=column("label", str), variance=column("variance"),
-                used_as_tip=used == "tip", tip_center=points("tip"),
-                tip_radius=column("tip_radius"), seg_a=points("a"), seg_b=points("b"),
-                link_radius=column("link_radius"),
-                primitive=optional_int("primitive"),
-                residual=optional("residual"), p_tip_map=optional("p_tip_map"),
-                label_map=np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
-                link_by_map=optional_int("link_by_map"),
-            )
+            return cls(**fields)
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
 
