@@ -87,14 +87,8 @@ def contact_table(robot: RobotModel, contacts: Any, classification: Any) -> Cont
     class; their large variance keeps their weight low.
     """
     m = len(contacts)
-    dim = robot.dim
-    pts = robot.joint_positions(contacts.q) if m else np.zeros((0, robot.dof + 1, 3))
-    rows = np.arange(m)
     link = np.asarray(contacts.link, dtype=np.int64)
-    seg_a = pts[rows, link, :dim]
-    seg_b = pts[rows, link + 1, :dim]
-    tip_radius = np.array([robot.contact_radius(int(k), tip=True) for k in link])
-    link_radius = robot.link_radii[link] if m else np.zeros(0)
+    seg_a, seg_b, tip_radius, link_radius = _link_geometry(robot, contacts.q, link)
     p_tip = np.asarray(classification.p_tip, dtype=float)
     label = np.asarray(classification.label)
     used_as_tip = np.where(label == "ambiguous", p_tip >= 0.5, label == "tip")
@@ -104,6 +98,19 @@ def contact_table(robot: RobotModel, contacts: Any, classification: Any) -> Cont
         seg_b=seg_b, link_radius=link_radius, primitive=np.full(m, -1),
         residual=np.full(m, np.nan),
     )
+
+
+def _link_geometry(robot: RobotModel, q: NDArray[np.float64], link: NDArray[np.int64]
+                   ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Link ``link[i]`` at configuration ``q[i]``: its axis ``seg_a → seg_b`` (joint ``n`` to
+    joint ``n + 1``; ``seg_b`` is also the centre of its outer sphere), the outer sphere's
+    radius (tip or joint) and the link's radius."""
+    m, dim = len(link), robot.dim
+    pts = robot.joint_positions(q) if m else np.zeros((0, robot.dof + 1, 3))
+    rows = np.arange(m)
+    return (pts[rows, link, :dim], pts[rows, link + 1, :dim],
+            np.array([robot.contact_radius(int(k), tip=True) for k in link]),
+            robot.link_radii[link] if m else np.zeros(0))
 
 
 def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> NDArray:
@@ -525,16 +532,11 @@ def link_candidates(robot: RobotModel, contacts: Any) -> LinkCandidates:
     prior = np.asarray(contacts.link_prior, dtype=float).reshape(len(contacts), -1)
     open_ = (prior > 0).sum(axis=1) > 1
     contact, link = np.nonzero((prior > 0) & open_[:, None])
-    dim = robot.dim
-    pts = (robot.joint_positions(contacts.q[contact]) if len(contact)
-           else np.zeros((0, robot.dof + 1, 3)))
-    rows = np.arange(len(contact))
+    seg_a, seg_b, tip_radius, link_radius = _link_geometry(robot, contacts.q[contact], link)
     return LinkCandidates(
         contact=contact.astype(np.int64), link=link.astype(np.int64),
-        prior=prior[contact, link], tip_center=pts[rows, link + 1, :dim],
-        tip_radius=np.array([robot.contact_radius(int(k), tip=True) for k in link]),
-        seg_a=pts[rows, link, :dim], seg_b=pts[rows, link + 1, :dim],
-        link_radius=robot.link_radii[link] if len(link) else np.zeros(0))
+        prior=prior[contact, link], tip_center=seg_b, tip_radius=tip_radius, seg_a=seg_a,
+        seg_b=seg_b, link_radius=link_radius)
 
 
 #: identifiability noise (fraction of the scene size) a *reported* primitive must be determined

@@ -125,7 +125,7 @@ def hypothesis_likelihoods(tip_center: FloatArray, tip_radius: FloatArray, seg_a
     like_l = np.zeros(m)
     ok_t = np.ones(m, dtype=bool)
     ok_l = np.ones(m, dtype=bool)
-    for view in _views(surfaces) if m else ():
+    for view in _views(surfaces):
         sig = view.sigma
         clear_tip = view.clearance(P) - wt
         clear_seg, t = view.segment_clearance(a, b)
@@ -176,9 +176,8 @@ def link_evidence(contact: NDArray[np.int64], prior: FloatArray, p_tip: FloatArr
     r = contact.shape[0]
     prior = np.asarray(prior, dtype=float).reshape(r)
     p = np.asarray(p_tip, dtype=float).reshape(r)
-    if r == 0 or not surfaces:
-        post = prior / np.maximum(np.bincount(contact, prior)[contact], 1e-300) if r else prior
-        return post, p.copy()
+    if r == 0:
+        return prior.copy(), p.copy()
     lt, ll = hypothesis_likelihoods(tip_center, tip_radius, seg_a, seg_b, link_radius,
                                     surfaces, floor=floor, **kwargs)
     ev = prior * (p * lt + (1 - p) * ll)

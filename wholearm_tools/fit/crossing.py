@@ -95,6 +95,14 @@ def sweep_objection(kind: str, params: dict[str, Any], primitive: Any, free_side
                            min_cuts=min_cuts, free_side=free_side)
 
 
+def _covered_arc(angles: FloatArray) -> tuple[float, float]:
+    """``(start, span)`` [rad] of the arc that points at ``angles`` on a circle cover: from the
+    end of the largest gap between neighbours, all the way round but that gap."""
+    order = np.sort(np.mod(angles, 2 * np.pi))
+    gaps = np.diff(np.concatenate([order, order[:1] + 2 * np.pi]))
+    return float(order[(int(np.argmax(gaps)) + 1) % len(order)]), 2 * np.pi - float(gaps.max())
+
+
 def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray
            ) -> tuple[FloatArray, FloatArray]:
     """Curve coordinates [m] of the support points and of the cut feet inside the support's
@@ -106,11 +114,8 @@ def _along(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatAr
         return s, f[(f > s.min()) & (f < s.max())]
     c = np.asarray(params["center"], dtype=float)
     r = float(np.asarray(params["radius"], dtype=float))
-    ang = np.mod(np.arctan2(support[:, 1] - c[1], support[:, 0] - c[0]), 2 * np.pi)
-    order = np.sort(ang)
-    gaps = np.diff(np.concatenate([order, order[:1] + 2 * np.pi]))
-    start = order[(int(np.argmax(gaps)) + 1) % len(order)]
-    span = 2 * np.pi - float(gaps.max())
+    ang = np.arctan2(support[:, 1] - c[1], support[:, 0] - c[0])
+    start, span = _covered_arc(ang)
     s = np.mod(ang - start, 2 * np.pi)
     f = np.mod(np.arctan2(feet[:, 1] - c[1], feet[:, 0] - c[0]) - start, 2 * np.pi)
     return r * s, r * f[f < span]
@@ -127,12 +132,8 @@ def _within_post_support(params: dict[str, Any], support: FloatArray, feet: Floa
     a = a / np.linalg.norm(a)
     u, v = perp_bases(a[None])
     s_sup, s_ft = (support - p0) @ a, (feet - p0) @ a
-    ang_sup = np.mod(np.arctan2((support - p0) @ v[0], (support - p0) @ u[0]), 2 * np.pi)
-    ang_ft = np.mod(np.arctan2((feet - p0) @ v[0], (feet - p0) @ u[0]), 2 * np.pi)
-    order = np.sort(ang_sup)
-    gaps = np.diff(np.concatenate([order, order[:1] + 2 * np.pi]))
-    start = order[(int(np.argmax(gaps)) + 1) % len(order)]
-    span = 2 * np.pi - float(gaps.max())
+    start, span = _covered_arc(np.arctan2((support - p0) @ v[0], (support - p0) @ u[0]))
+    ang_ft = np.arctan2((feet - p0) @ v[0], (feet - p0) @ u[0])
     on_arc = np.mod(ang_ft - start, 2 * np.pi) <= span
     return on_arc & (s_ft >= s_sup.min()) & (s_ft <= s_sup.max())
 

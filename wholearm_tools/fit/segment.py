@@ -359,10 +359,10 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
 
     best_fit, best_members = fit, members
     for first in cand[:starts]:
-        f = refit(fit, np.union1d(members, [first]))
+        m = np.union1d(members, [first])
+        f = refit(fit, m)
         if f is None:
             continue
-        m = np.union1d(members, [first])
         left = cand[cand != first]
         while left.size:
             rl = np.abs(residuals(f.kind, f.params, data.take(left), f.free_side))
