@@ -112,6 +112,64 @@ def test_frontier_vary_return_takes_another_posture_where_a_return_was_blocked()
     np.testing.assert_allclose(clear, home)
 
 
+def test_frontier_probe_links_pushes_the_tip_through_where_an_inner_link_stopped() -> None:
+    """After a move stopped by an inner link (the outermost joint short of its target is not
+    the last), probe_links puts the tip behind a point of that link in the stopped
+    configuration and then pushes it past the point along the link's motion there; a move
+    stopped at the last link, or with the option off, is followed as before."""
+    from wholearm_tools.sim.collision import Collider
+    from wholearm_tools.sim.occupancy import SweptGrid
+    from wholearm_tools.sim.strategies import make_strategy
+
+    sc = load_scenario("paper_spatial")
+
+    def strategy(probe: float):
+        s = make_strategy("frontier", sc.robot, Collider(sc.robot, sc.obstacles[:1]),  # floor
+                          SweptGrid(sc.robot), rng=0, home_every=0, probe_links=probe,
+                          probe_depth=0.04)
+        s.home = sc.home.copy()
+        return s
+
+    q = sc.home.copy()
+    target = q + np.array([0.6, 0.3, 0.2, 0.0, 0.0])  # base, shoulder and elbow swing
+    stop = q + np.array([0.3, 0.15, 0.1, 0.0, 0.0])  # link 2 (the forearm) stopped
+    moving = target - q  # joint-space direction of the move
+    back = q + np.array([0.25, 0.12, 0.08, 0.0, 0.0])  # where the retreat left the arm
+    strat = strategy(1.0)
+    strat.observe(np.array([q, stop]), np.array([stop, target]))
+    pre = strat.next_target(back)
+    push = strat.next_target(pre)
+    a, b = sc.robot.joint_positions(stop)[2:4]  # link 2's axis when it stopped
+    axes = sc.robot.joint_axes(stop)
+
+    def along(x):  # the probed point of the link and the link's motion there
+        t = np.clip(np.dot(x - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        p = a + t * (b - a)
+        v = np.cross(axes[:3], p - sc.robot.joint_positions(stop)[:3]).T @ moving[:3]
+        return p, v / np.linalg.norm(v)
+
+    tip_pre = sc.robot.joint_positions(pre)[-1]
+    tip_push = sc.robot.joint_positions(push)[-1]
+    p, v = along(0.5 * (tip_pre + tip_push))
+    assert np.linalg.norm(tip_pre - (p - 0.04 * v)) < 0.01  # behind the link, where it swept
+    assert np.linalg.norm(tip_push - (p + 0.04 * v)) < 0.01  # pushed past it
+    assert np.dot(tip_push - tip_pre, v) > 0.07
+
+    # the last link stopped: an ordinary move follows (no probe), as with the option off
+    for probe, last in ((1.0, True), (0.0, False)):
+        s = strategy(probe)
+        tgt = target.copy()
+        stp = stop.copy()
+        if last:
+            tgt[4] += 0.4
+            stp[4] += 0.2
+        s.observe(np.array([q, stp]), np.array([stp, tgt]))
+        nxt = s.next_target(back)
+        assert s._probe is None
+        assert nxt is None or np.linalg.norm(sc.robot.joint_positions(nxt)[-1]
+                                             - tip_pre) > 0.01
+
+
 def test_paper_planar_default_run_touches_every_surface() -> None:
     covs, kinds = _default_run_coverage("paper_planar")  # 180 s, seed 0
     assert len(covs) == 6

@@ -83,10 +83,12 @@ class Strategy(ABC):
         self.max_step = None if max_step is None else float(max_step)
         self.free_target = bool(free_target)
 
-    def acceptable(self, q: FloatArray, candidates: FloatArray) -> NDArray[np.bool_]:
-        """Candidates far enough from ``q`` whose configuration is free (with margin)."""
+    def acceptable(self, q: FloatArray, candidates: FloatArray,
+                   min_step: float | None = None) -> NDArray[np.bool_]:
+        """Candidates at least ``min_step`` (default: the strategy's) from ``q`` whose
+        configuration is free (with margin)."""
         dist = np.linalg.norm(candidates - q, axis=1)
-        far = dist >= self.min_step
+        far = dist >= (self.min_step if min_step is None else min_step)
         ok = np.zeros(len(candidates), dtype=bool)
         if not np.any(far):
             return ok
@@ -251,6 +253,16 @@ class FrontierStrategy(NoveltyStrategy):
     by the same obstacle at the same place makes the same contact every time (paper_spatial
     seed 0, 180 s: seven of the sphere's eleven contacts are one configuration, the base yaw
     swinging home into it), while another posture passes it or touches it elsewhere.
+    With ``probe_links`` > 0, a move stopped by an inner link (the outermost joint that did not
+    reach its target is not the last one: the robot's own link identification) is followed,
+    with that probability, by a **tip probe** of the place: a point along the stopped link, in
+    the stopped configuration, and the direction it was moving there give a line through the
+    contact; the arm first puts its tip ``probe_depth`` m behind that point (space the link
+    just swept) and then pushes it ``probe_depth`` m beyond (into the obstacle).  A link
+    contact constrains a surface only through a tangent line, and link contacts of one joint's
+    sweep all lie in one plane (a vertical post touched by link 2 of a yawing arm fits a whole
+    family of cylinders); a tip on the same surface pins it.  No probe where the place is
+    already well touched (as for follow moves).
     Nothing here reads the environment: frontier cells come from
     the swept map and the blocked moves (``observe``), i.e. the robot's own motion history.
     """
@@ -263,8 +275,13 @@ class FrontierStrategy(NoveltyStrategy):
                  follow: float = 0.0, follow_step: float = 0.25, follow_max: int = 4,
                  follow_radius: float = 0.08, follow_density: int = 5, crowd: float = 0.0,
                  crowd_radius: float = 0.1, vary_return: bool = False,
-                 vary_scale: float = 0.4, **kwargs: Any) -> None:
+                 vary_scale: float = 0.4, probe_links: float = 0.0, probe_depth: float = 0.04,
+                 **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.probe_links = float(probe_links)
+        self.probe_depth = float(probe_depth)
+        self._probe: FloatArray | None = None  # second stage of a tip probe, when queued
+        self._stopped_link: tuple[FloatArray, FloatArray, int] | None = None
         self.vary_return = bool(vary_return)
         self.vary_scale = float(vary_scale)
         self._returning = False  # the last target was a home-return step
@@ -301,6 +318,14 @@ class FrontierStrategy(NoveltyStrategy):
     def observe(self, swept: FloatArray, attempted: FloatArray | None) -> None:
         super().observe(swept, attempted)
         self._blocked = None if attempted is None or not len(attempted) else attempted[0].copy()
+        self._stopped_link = None
+        if self._blocked is not None:
+            self._probe = None  # a probe's approach was stopped: the probe is over
+            moved = np.abs(attempted[-1] - attempted[0]) > 1e-6
+            if np.any(moved):
+                link = int(np.flatnonzero(moved).max())
+                if link < self.robot.dof - 1:
+                    self._stopped_link = (self._blocked, attempted[-1] - attempted[0], link)
         if self._returning and self._blocked is not None:
             self._return_blocks.append(self._blocked)
         if attempted is not None and len(attempted):
@@ -325,17 +350,19 @@ class FrontierStrategy(NoveltyStrategy):
         unknown = ~(swept | g.attempted) & self._in_reach
         return np.flatnonzero(near & unknown)
 
-    def _ik(self, q: FloatArray, probe: int, goal: FloatArray) -> FloatArray:
+    def _ik(self, q: FloatArray, probe: int, goal: FloatArray, step: float | None = None,
+            iterations: int = 8) -> FloatArray:
         """Damped least-squares steps moving point ``probe`` (joint index, ``dof`` = tip) of
-        the arm toward ``goal``, at most ``probe_step`` metres in all."""
+        the arm toward ``goal``, at most ``step`` (default ``probe_step``) metres in all."""
         robot, dim = self.robot, self.grid.dim
+        step = self.probe_step if step is None else step
         p0 = robot.joint_positions(q)[probe, :dim]
         d = goal - p0
         dist = float(np.linalg.norm(d))
-        if dist > self.probe_step:
-            goal = p0 + d * (self.probe_step / dist)
+        if dist > step:
+            goal = p0 + d * (step / dist)
         x = q.copy()
-        for _ in range(8):
+        for _ in range(iterations):
             pts = robot.joint_positions(x)
             axes = robot.joint_axes(x)
             p = pts[probe]
@@ -408,6 +435,29 @@ class FrontierStrategy(NoveltyStrategy):
         far += self.rng.uniform(0.0, 0.5 * self.grid.cell, size=far.shape)
         return cand[int(np.argmax(far))]
 
+    def _tip_probe(self, q: FloatArray) -> FloatArray | None:
+        """First stage of a tip probe of the place where an inner link was just stopped (see
+        the class docstring); queues the second stage."""
+        stop, delta, link = self._stopped_link
+        dim, robot = self.grid.dim, self.robot
+        pts = robot.joint_positions(stop)
+        axes = robot.joint_axes(stop)
+        s = self.rng.uniform(0.3, 1.0)
+        p = pts[link] + s * (pts[link + 1] - pts[link])
+        v = np.cross(axes[: link + 1], p - pts[: link + 1]).T @ delta[: link + 1]
+        v = v[:dim]
+        vn = float(np.linalg.norm(v))
+        if vn < 1e-9:
+            return None
+        d = v / vn
+        far = 2.0 * robot.reach
+        pre = self._ik(q, robot.dof, p[:dim] - self.probe_depth * d, step=far, iterations=40)
+        push = self._ik(pre, robot.dof, p[:dim] + self.probe_depth * d, step=far, iterations=40)
+        if not self.acceptable(q, pre[None])[0] or np.linalg.norm(push - pre) < 1e-3:
+            return None
+        self._probe = push
+        return pre
+
     def _blocked_before(self, q: FloatArray, target: FloatArray, tol: float = 0.1) -> bool:
         """The straight joint-space path ``q`` → ``target`` passes within ``tol`` rad of a
         configuration where an earlier home-return step was blocked."""
@@ -442,6 +492,15 @@ class FrontierStrategy(NoveltyStrategy):
                 return self.home.copy()
             self._unhook_joints = list(range(self.robot.dof - 1, -1, -1))
             return self.next_target(q)
+        if self._probe is not None:
+            push, self._probe = self._probe, None
+            if self.acceptable(q, push[None], min_step=1e-3)[0]:
+                return push
+        if (self.probe_links > 0.0 and self._stopped_link is not None and self._sparse()
+                and self.rng.random() < self.probe_links):
+            pre = self._tip_probe(q)
+            if pre is not None:
+                return pre
         n = self.robot.dof
         if (self._blocked is not None and self._streak < self.follow_max
                 and self._sparse() and self.rng.random() < self.follow):
