@@ -217,3 +217,51 @@ def test_an_undetermined_post_is_completed_by_contacts_on_its_other_side():
     assert members.tolist() == [0, 1, 2, 3, *links.tolist()]  # the far tips joined, no other
     assert param_error("cylinder", fit.params, true) < 1e-6
     assert fit.sensitivity < 0.1 * one_sided.sensitivity
+
+
+def test_a_seed_of_link_contacts_from_one_sweep_plane_is_extended_until_determined():
+    """Link bodies swept in one vertical plane are all tangent to a vertical post at the same
+    distance from their plane, so the seven nearest (mostly one plane) fit a whole family of
+    cylinders.  The extended seed takes further nearest contacts one at a time, refitted from
+    the last solution while the fit stays good; contacts from another plane pin the post."""
+    import math
+
+    from fit_synth import param_error
+
+    from wholearm_tools.fit.segment import _fit_seed, _seed_job, _SeedConfig
+
+    r, w = 0.06, 0.03
+    foot = np.array([0.36, 0.2, 0.0])
+    a, b = [], []
+    for ang in np.radians([0.0, 55.0, 120.0]):  # three sweep planes, 9 link contacts each
+        n = np.array([np.cos(ang), np.sin(ang), 0.0])
+        t = np.array([-n[1], n[0], 0.0])
+        for j, (pitch, z) in enumerate(zip(np.linspace(-0.5, 0.5, 9), np.linspace(0.15, 0.45, 9),
+                                           strict=True)):
+            c = foot + (r + w) * n + [0.0, 0.0, z]  # the link's closest point to the axis
+            d = np.cos(pitch) * t + np.sin(pitch) * np.array([0.0, 0.0, 1.0])
+            s = 0.05 * ((7 * j) % 5 - 2)  # not always at the link's middle
+            a.append(c - (0.15 + s) * d)
+            b.append(c + (0.15 - s) * d)
+    rng = np.random.default_rng(0)
+    a = np.array(a) + rng.normal(0.0, 2e-5, (27, 3))
+    b = np.array(b) + rng.normal(0.0, 2e-5, (27, 3))
+    data = FitData.create(np.zeros((0, 3)), 0.02, 1.0, a, b, w, 1.0,
+                          free_points=np.array([[0.0, 0.0, 0.3]]), dim=3)
+    true = {"point": foot, "axis": np.array([0.0, 0.0, 1.0]), "radius": r}
+    x = data.contact_points()
+    order = np.argsort(np.linalg.norm(x[:, None] - x[None], axis=2), axis=1)
+    sigma, max_sens = 3e-5, 2000.0
+    out = {}
+    for extend in (0, 12):
+        cfg = _SeedConfig({"cylinder": 7}, ("cylinder",), (), True, sigma, 2.5, 30, 1e-3, 0,
+                          extend, max_sens if extend else math.inf)
+        ((_kind, members, fit),) = _fit_seed(cfg, _seed_job(4, 7, order, data, cfg))
+        out[extend] = members, fit
+    members, fit = out[0]
+    assert len(members) == 7
+    assert fit.sensitivity > 10 * max_sens  # a family: not determined
+    members, fit = out[12]
+    assert len(members) > 7
+    assert fit.sensitivity < max_sens
+    assert param_error("cylinder", fit.params, true) < 1e-3

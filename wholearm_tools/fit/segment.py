@@ -14,7 +14,10 @@
 4. **Growth**: a hypothesis absorbs every contact connected to it (k-nearest-neighbour graph)
    through contacts whose residual is within ``k_sigma * sigma``; it is refitted (warm
    start) and grown again until its support stops changing; a refit whose RMS exceeds
-   ``1.5 sigma`` (``sqrt(chi2)`` level) stops the growth.
+   ``1.5 sigma`` (``sqrt(chi2)`` level) stops the growth.  Up to two more rounds seed among
+   the contacts no hypothesis covers; there a seed that fits but does not determine its type
+   (link contacts of one joint's sweep, all in one plane) takes further nearest contacts one
+   at a time, refitted from the last solution, until it is determined (``extend_seeds``).
 5. **Selection** by description length (in nats): a contact left unexplained costs
    ``log(extent / sigma)`` (its position coded at the noise precision), an explained one
    ``z^2 / 2`` (``z`` = residual / sigma) and a primitive ``dof / 2 * log(N)`` (BIC).
@@ -254,6 +257,8 @@ class _SeedConfig:
     max_iter: int
     ransac_tol: float
     key: int
+    extend: int = 0
+    max_sensitivity: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -268,7 +273,7 @@ class _SeedJob:
 
 
 def _seed_job(s: int, trim: int, order: np.ndarray, data: FitData, cfg: _SeedConfig) -> _SeedJob:
-    near = order[s, :max(cfg.sizes.values()) + trim]
+    near = order[s, :max(cfg.sizes.values()) + trim + (cfg.extend if trim else 0)]
     return _SeedJob(s, trim, near, data.take(near))
 
 
@@ -315,6 +320,29 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
             if not g:
                 break
             members, f = keep, g
+        if cfg.trim_ok and trim and f and f.sensitivity > cfg.max_sensitivity:
+            members, f = extend(kind, members, f)
+        return members, f
+
+    def extend(kind: str, members: np.ndarray, f: FitResult) -> tuple[np.ndarray, FitResult]:
+        # a seed that fits but does not determine its primitive (link contacts of one joint's
+        # sweep: every tangent line in one plane, a family of cylinders fits them) takes the
+        # next nearest contacts one at a time, each refit from the last solution, while the
+        # fit stays good, until they determine it: refitting from a member of the family moves
+        # along it to the one the new contact also touches, where a fresh fit to the larger
+        # neighbourhood falls into another minimum
+        if _rms_dof(f) > cfg.accept * cfg.sigma:
+            return members, f
+        for c in job.near[cfg.sizes[kind] + job.trim:]:
+            if c in members:
+                continue
+            cand = np.sort(np.append(members, c))
+            g = fit_primitive(kind, take(cand), max_iter=cfg.max_iter, free_side=f.free_side,
+                              initial=f.params)
+            if g and _rms_dof(g) <= 1.5 * cfg.sigma:
+                members, f = cand, g
+                if f.sensitivity <= cfg.max_sensitivity:
+                    break
         return members, f
 
     fits = [(k, *one(k, job.trim)) for k in cfg.cheap]
@@ -395,6 +423,7 @@ def segment(
     seed_accept: float = 2.5,
     seed_max_iter: int = 30,
     trim_extra: int = 7,
+    extend_seeds: int = 12,
     noise_floor: float = 0.0,
     min_radius: float = 0.0,
     max_radius_ratio: float = 50.0,
@@ -429,6 +458,10 @@ def segment(
     trim_extra : int
         Seeds that fit poorly start this many contacts larger and drop their worst contact
         until they fit or reach the seed size (mixed neighbourhoods next to an intersection).
+    extend_seeds : int
+        A seed (in that second pass) that fits well but does not determine its primitive tries
+        up to this many further nearest contacts, one at a time, each refitted from the last
+        solution and kept while the fit stays good, until it is determined.
     neighbours : int
         Neighbours per contact in the adjacency graph used for growth.
     min_support : int or None
@@ -506,9 +539,11 @@ def segment(
     cheap = tuple(k for k in kinds if MODELS[k].dof <= 5) or kinds
     costly = tuple(k for k in kinds if k not in cheap)
 
-    def seeds_at(points: list[int], trim: int) -> list[list[tuple[str, np.ndarray, FitResult]]]:
+    def seeds_at(points: list[int], trim: int, extend: bool = False,
+                 ) -> list[list[tuple[str, np.ndarray, FitResult]]]:
         cfg = _SeedConfig(seed_sizes, cheap, costly, trim_ok, float(sigma_seed), seed_accept,
-                          seed_max_iter, ransac_tol, key)
+                          seed_max_iter, ransac_tol, key, extend_seeds if extend else 0,
+                          max_rel_std / sigma_id if trim_ok and extend else math.inf)
         jobs = [_seed_job(s, trim if trim_ok else 0, order, data, cfg) for s in points]
         if executor is None or len(jobs) < 2:
             return [_fit_seed(cfg, job) for job in jobs]
@@ -669,7 +704,7 @@ def segment(
             break
         extra = [int(left[i]) for i in _farthest_points(X[left], max_seeds // 2, rng)]
         n_before = len(hyps)
-        grow_all(extra, seeds_at(extra, trim_extra))
+        grow_all(extra, seeds_at(extra, trim_extra, extend=True))
         if len(hyps) == n_before:
             break
 
