@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from wholearm_tools.classify.refine import MapSurface, refine_with_map
 from wholearm_tools.contact_table import ContactTable, write_contact_table
 from wholearm_tools.errors import InputError
+from wholearm_tools.fit.crossing import MIN_CUTS
 from wholearm_tools.logs.records import Run
 from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap, write_map
 from wholearm_tools.robot.model import RobotModel
@@ -428,7 +429,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
         why = None if sweep is None else crossing.sweep_objection(
             fit.kind, fit.params, fit.primitive, fit.free_side, support, sweep, base,
             tol=sweep_tolerance(seg.noise), need=MODELS[fit.kind].dof + 2, min_span=0.5 * B,
-            min_cuts=CROSSING_MIN_CUTS, max_escaped=ENCLOSURE_MAX_ESCAPED)
+            min_cuts=MIN_CUTS, max_escaped=ENCLOSURE_MAX_ESCAPED)
         if why:
             messages.append(f"a {fit.kind} on {len(members)} contacts not reported: {why}")
             continue
@@ -630,10 +631,6 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
 #: base (the rest of the motion went out through openings): see
 #: :func:`wholearm_tools.fit.crossing.escaped_share`
 ENCLOSURE_MAX_ESCAPED = 0.5
-
-#: cuts of the robot's sweep inside a line's, circle's or plane's support that are ignored
-#: (fewer than this): see :mod:`wholearm_tools.fit.crossing`
-CROSSING_MIN_CUTS = 3
 
 #: a link lies flat against a plane when its two ends are at the same distance from it to
 #: within this angle (the sine of it, per unit link length)

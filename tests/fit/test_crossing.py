@@ -133,6 +133,37 @@ def test_a_post_the_arm_passed_through_between_its_contacts_goes():
     assert check(through(-0.05), side=-1.0) is None  # a bore: crossed through windows
 
 
+def test_a_ball_the_arm_passed_through_within_its_contacts_goes():
+    """A large sphere (free side outside: a ball) held up by contacts on two surfaces half a
+    metre apart; the arm swept through its body between them, which a ball does not allow.
+    Capsules through the far side of the ball (outside the cap its contacts cover) or beside
+    it leave it, and an enclosure (free space inside) is not checked here."""
+    from wholearm_tools.geometry import Sphere
+
+    c, r = np.array([0.0, 0.0, 0.0]), 0.7
+    ball = Sphere(c, r)
+    params = {"center": c, "radius": r}
+    ang = np.radians([-25.0, -20.0, -15.0, 15.0, 20.0, 25.0])  # two clusters, 0.5 m apart
+    support = r * np.c_[np.sin(ang), np.zeros(6), -np.cos(ang)]  # around the south pole
+
+    def through(z0):  # horizontal capsules along x at height z0, 12 of them along y
+        y = np.linspace(-0.1, 0.1, 12)
+        return Sweep(np.c_[np.full(12, -0.2), y, np.full(12, z0)],
+                     np.c_[np.full(12, 0.2), y, np.full(12, z0)], np.full(12, 0.02))
+
+    def check(sweep, side=1.0):
+        feet = cut_feet(ball, side, sweep, tol=2e-3)
+        return crossed_between("sphere", params, support, feet, need=6, min_span=0.01,
+                               min_cuts=3, free_side=side)
+
+    why = check(through(-0.66))  # through the bottom, between the two clusters
+    assert why is not None
+    assert "inside the region its contacts span" in why
+    assert check(through(0.66)) is None  # through the top, far from its contacts
+    assert check(through(-0.8)) is None  # below it
+    assert check(through(-0.66), side=-1.0) is None  # an enclosure
+
+
 @pytest.mark.parametrize("kind", ["sphere", "cylinder"])
 def test_other_types_are_not_checked(kind):
     """A bore's wall is crossed through a junction's window, inside its contacts."""

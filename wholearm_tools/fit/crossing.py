@@ -21,8 +21,13 @@ support:
   over its top, never through it (paper_spatial seed 5, 180 s: a tilted cylinder through link
   contacts on both posts, 45 cm apart, 268 mm RMS from the post it was matched to).
 
-Other types (sphere, cone, torus) and cylinders with free space inside are not checked here: a
-bore's wall is crossed through a junction's window, inside the region its contacts surround.
+* a sphere the robot is outside of (a ball): cuts within the cap its support covers (no
+  farther from the support's mean direction, seen from the centre, than the farthest support
+  point) rule it out, for the same reason (paper_spatial seed 1, 240 s, with tip probes: a
+  sphere r 0.72 m through link contacts on a post and on the ball, 0.5 m apart).
+
+Other types (cone, torus) and enclosures (free space inside) are not checked here: a bore's
+wall is crossed through a junction's window, inside the region its contacts surround.
 """
 
 from __future__ import annotations
@@ -38,6 +43,13 @@ FloatArray = NDArray[np.float64]
 
 #: primitive types :func:`crossed_between` checks
 CHECKED = ("line", "circle", "plane")
+
+#: solid bodies (free side outside) :func:`crossed_between` checks: a post and a ball
+SOLIDS = ("cylinder", "sphere")
+
+#: fewer cuts than this inside a support are ignored (a capsule grazing the surface within the
+#: tolerance on a noisy log)
+MIN_CUTS = 3
 
 
 def cut_feet(primitive: Any, free_side: float, sweep: Sweep, tol: float) -> FloatArray:
@@ -138,6 +150,22 @@ def _within_post_support(params: dict[str, Any], support: FloatArray, feet: Floa
     return on_arc & (s_ft >= s_sup.min()) & (s_ft <= s_sup.max())
 
 
+def _within_cap(params: dict[str, Any], support: FloatArray, feet: FloatArray
+                ) -> NDArray[np.bool_]:
+    """Which ``feet`` on a sphere lie within the cap its ``support`` covers (seen from the
+    centre, no farther from the support's mean direction than its farthest point)."""
+    c = np.asarray(params["center"], dtype=float)
+
+    def unit(x: FloatArray) -> FloatArray:
+        d = x - c
+        return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+
+    u = unit(support)
+    m = u.mean(axis=0)
+    m /= max(float(np.linalg.norm(m)), 1e-12)
+    return unit(feet) @ m >= float(np.min(u @ m))
+
+
 def crossed_between(kind: str, params: dict[str, Any], support: FloatArray, feet: FloatArray,
                     *, need: int, min_span: float, min_cuts: int,
                     free_side: float | None = None) -> str | None:
@@ -147,14 +175,15 @@ def crossed_between(kind: str, params: dict[str, Any], support: FloatArray, feet
     ``min_span``: the contacts and the length one uncut piece of a curve's support needs;
     ``min_cuts``: fewer cuts inside the support than this are ignored (a capsule grazing the
     surface within the tolerance on a noisy log); ``free_side``: the primitive's (a cylinder
-    is checked only when it is > 0, a post).
+    or sphere is checked only when it is > 0, a post or a ball).
     """
     support = np.asarray(support, dtype=float)
     feet = np.asarray(feet, dtype=float)
     if len(support) < 2 or len(feet) == 0:
         return None
-    if kind == "cylinder" and free_side is not None and free_side > 0:
-        inside = int(np.count_nonzero(_within_post_support(params, support, feet)))
+    if kind in SOLIDS and free_side is not None and free_side > 0:
+        within = _within_post_support if kind == "cylinder" else _within_cap
+        inside = int(np.count_nonzero(within(params, support, feet)))
         if inside < min_cuts:
             return None
         return (f"the robot passed through it {inside} times inside the region its contacts "

@@ -68,6 +68,7 @@ from wholearm_tools.fit.core import (
     sweep_tolerance,
     sweep_violation,
 )
+from wholearm_tools.fit.crossing import MIN_CUTS, SOLIDS, crossed_between, cut_feet
 from wholearm_tools.fit.data import FitData, Sweep
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.result import FitResult
@@ -623,9 +624,18 @@ def segment(
             _, t = prim.segment_signed_distance(sub.link_a, sub.link_b, free_side=fit.free_side)
             pts.append(sub.link_a + np.asarray(t)[:, None] * (sub.link_b - sub.link_a))
         support = np.asarray(prim.closest_point(np.vstack(pts)))
-        check = sweep_violation(prim, fit.free_side, support, sweep, near=sweep_near,
-                                tol=sweep_tolerance(sigma))
-        return not check.rules_out()
+        tol = sweep_tolerance(sigma)
+        if sweep_violation(prim, fit.free_side, support, sweep, near=sweep_near,
+                           tol=tol).rules_out():
+            return False
+        if fit.kind in SOLIDS and fit.free_side > 0:
+            # a post or ball the robot passed through where its contacts are: the contacts of
+            # two surfaces (a post and the ball beside it) fit a huge sphere, which taking
+            # their contacts would keep their own surfaces from being selected
+            feet = cut_feet(prim, fit.free_side, sweep, tol)
+            return crossed_between(fit.kind, fit.params, support, feet, need=0, min_span=0.0,
+                                   min_cuts=MIN_CUTS, free_side=fit.free_side) is None
+        return True
 
     def zres(kind: str, fit: FitResult) -> np.ndarray:
         return residuals(kind, fit.params, data, fit.free_side) / sigma
