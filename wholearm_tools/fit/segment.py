@@ -15,9 +15,9 @@
    through contacts whose residual is within ``k_sigma * sigma``; it is refitted (warm
    start) and grown again until its support stops changing; a refit whose RMS exceeds
    ``1.5 sigma`` (``sqrt(chi2)`` level) stops the growth.  Up to two more rounds seed among
-   the contacts no hypothesis covers; there a seed that fits but does not determine its type
-   (link contacts of one joint's sweep, all in one plane) takes further nearest contacts one
-   at a time, refitted from the last solution, until it is determined (``extend_seeds``).
+   the contacts no hypothesis covers; there a 3-D seed that fits but does not determine its
+   type (link contacts of one joint's sweep, all in one plane) takes further nearest contacts
+   one at a time, refitted from the last solution, until it is determined (``extend_seeds``).
 5. **Selection** by description length (in nats): a contact left unexplained costs
    ``log(extent / sigma)`` (its position coded at the noise precision), an explained one
    ``z^2 / 2`` (``z`` = residual / sigma) and a primitive ``dof / 2 * log(N)`` (BIC).
@@ -460,7 +460,8 @@ def segment(
         Seeds that fit poorly start this many contacts larger and drop their worst contact
         until they fit or reach the seed size (mixed neighbourhoods next to an intersection).
     extend_seeds : int
-        A seed (in that second pass) that fits well but does not determine its primitive tries
+        A 3-D seed of the later rounds (among contacts no hypothesis covers) that fits well
+        but does not determine its primitive tries
         up to this many further nearest contacts, one at a time, each refitted from the last
         solution and kept while the fit stays good, until it is determined.
     neighbours : int
@@ -714,7 +715,10 @@ def segment(
             break
         extra = [int(left[i]) for i in _farthest_points(X[left], max_seeds // 2, rng)]
         n_before = len(hyps)
-        grow_all(extra, seeds_at(extra, trim_extra, extend=True))
+        # (3-D only: the contacts of a planar arm's link lie in the plane of the primitive,
+        # no sweep plane leaves a family; extended circles of lab_sharp took the contacts
+        # of a small line and then were too weakly determined to report)
+        grow_all(extra, seeds_at(extra, trim_extra, extend=data.dim == 3))
         if len(hyps) == n_before:
             break
 
