@@ -641,6 +641,21 @@ ENCLOSURE_MAX_ESCAPED = 0.5
 FLAT_LINK_SIN = float(np.sin(np.radians(2.0)))
 
 
+def _refit_explaining(fit: Any, members: NDArray, data: Any, sigma: float) -> Any | None:
+    """``fit`` refitted (warm start) to the contacts ``members``, or None unless it explains
+    them all: dof-corrected RMS residual at most 1.5 ``sigma`` (the chi-square level)."""
+    from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.models import MODELS
+
+    again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side,
+                          initial=dict(fit.params))
+    if not again:
+        return None
+    r = np.asarray(again.residuals)
+    dof = max(len(r) - MODELS[fit.kind].dof, 1)
+    return again if float(np.sqrt(np.sum(r * r) / dof)) <= 1.5 * sigma else None
+
+
 def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float,
                       k_sigma: float = 3.0) -> tuple[list[tuple[Any, NDArray]], int]:
     """Merge primitives of one type that one least-squares fit explains together (its
@@ -653,8 +668,7 @@ def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float
     touch with the link's outer end is refitted afterwards at the tip radius, and only then
     lies on the other: on lab_circle (seed 0) one wall came out as two lines 3 mm apart
     (11 link contacts fitted at the link radius) that coincide once refitted."""
-    from wholearm_tools.fit import fit_primitive, residuals
-    from wholearm_tools.fit.models import MODELS
+    from wholearm_tools.fit import residuals
 
     out = list(groups)
     merged = 0
@@ -667,11 +681,8 @@ def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float
             if fi.kind == fj.kind and np.all(np.abs(residuals(
                     fi.kind, fi.params, data.take(mj), fi.free_side)) <= 10 * k_sigma * sigma):
                 union = np.union1d(mi, mj)
-                both = fit_primitive(fi.kind, data.take(union), free_side=fi.free_side,
-                                     initial=dict(fi.params))
-                r = np.asarray(both.residuals) if both else np.zeros(0)
-                dof = max(len(r) - MODELS[fi.kind].dof, 1)
-                if both and float(np.sqrt(np.sum(r * r) / dof)) <= 1.5 * sigma:
+                both = _refit_explaining(fi, union, data, sigma)
+                if both is not None:
                     out[i] = (both, union)
                     del out[j]
                     merged += 1
@@ -693,7 +704,7 @@ def _dissolve_redundant(groups: list[tuple[Any, NDArray]], data: Any, sigma: flo
     contacts as the other class) can find a surface after a smaller primitive took a patch of
     it: on paper_spatial seed 1 (240 s, tip probes) a plane through six link contacts of
     post 1 and one stray tip 42 mm off the post, reported beside the post."""
-    from wholearm_tools.fit import fit_primitive, residuals
+    from wholearm_tools.fit import residuals
     from wholearm_tools.fit.models import MODELS
 
     out = list(groups)
@@ -710,12 +721,8 @@ def _dissolve_redundant(groups: list[tuple[Any, NDArray]], data: Any, sigma: flo
             if len(left) >= MODELS[fj.kind].dof + 2 or len(take) == 0:
                 continue
             union = np.union1d(mi, take)
-            both = fit_primitive(fi.kind, data.take(union), free_side=fi.free_side,
-                                 initial=dict(fi.params))
-            if not both:
-                continue
-            r = np.asarray(both.residuals)
-            if float(np.sqrt(np.sum(r * r) / max(len(r) - MODELS[fi.kind].dof, 1))) > 1.5 * sigma:
+            both = _refit_explaining(fi, union, data, sigma)
+            if both is None:
                 continue
             out[i] = (both, union)
             del out[j]

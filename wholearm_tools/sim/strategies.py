@@ -321,9 +321,9 @@ class FrontierStrategy(NoveltyStrategy):
         self._stopped_link = None
         if self._blocked is not None:
             self._probe = None  # a probe's approach was stopped: the probe is over
-            moved = np.abs(attempted[-1] - attempted[0]) > 1e-6
-            if np.any(moved):
-                link = int(np.flatnonzero(moved).max())
+            short = np.abs(attempted[-1] - attempted[0]) > 1e-6  # joints short of target
+            if np.any(short):
+                link = int(np.flatnonzero(short).max())
                 if link < self.robot.dof - 1:
                     self._stopped_link = (self._blocked, attempted[-1] - attempted[0], link)
         if self._returning and self._blocked is not None:
@@ -441,11 +441,9 @@ class FrontierStrategy(NoveltyStrategy):
         stop, delta, link = self._stopped_link
         dim, robot = self.grid.dim, self.robot
         pts = robot.joint_positions(stop)
-        axes = robot.joint_axes(stop)
         s = self.rng.uniform(0.3, 1.0)
         p = pts[link] + s * (pts[link + 1] - pts[link])
-        v = np.cross(axes[: link + 1], p - pts[: link + 1]).T @ delta[: link + 1]
-        v = v[:dim]
+        v = robot.point_velocities(stop, delta, link, s)[:dim]  # the link's motion there
         vn = float(np.linalg.norm(v))
         if vn < 1e-9:
             return None
