@@ -580,6 +580,7 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     from wholearm_tools.fit.core import residuals
     from wholearm_tools.fit.data import MIN_WEIGHT
     from wholearm_tools.fit.models import MODELS
+    from wholearm_tools.fit.segment import complete_support
 
     swap = np.zeros(len(table), dtype=bool)
     left = reps[seg_rows[reps] < 0]
@@ -609,12 +610,20 @@ def _other_interpretation(table: ContactTable, reps: NDArray, seg_rows: NDArray,
     taken = np.zeros(len(table), dtype=bool)
     for k, fit in enumerate(seg.primitives):
         mem = seg.members(k)
+        need = MODELS[fit.kind].dof + 2
+        if len(np.unique(fit_rows[mem])) < need:
+            # both versions of an ambiguous contact can be members and count once: a
+            # primitive left with too few contacts takes those of the leftovers (not another
+            # version of its own) that one refit also explains
+            free = seg.unexplained[~np.isin(fit_rows[seg.unexplained], fit_rows[mem])
+                                   & ~taken[fit_rows[seg.unexplained]]]
+            fit, mem = complete_support(fit, mem, data, free, seg.noise, reach=COMPLETE_REACH)
         r = np.abs(residuals(fit.kind, fit.params, data, fit.free_side))
         chosen: dict[int, int] = {}
         for i in mem[np.argsort(r[mem], kind="stable")]:
             chosen.setdefault(int(fit_rows[i]), int(i))
         keep = {row: i for row, i in chosen.items() if not taken[row]}
-        if len(keep) < MODELS[fit.kind].dof + 2:
+        if len(keep) < need:
             continue
         idx = np.array(sorted(keep), dtype=np.int64)
         versions = np.array([keep[row] for row in idx.tolist()])
