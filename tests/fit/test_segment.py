@@ -219,6 +219,54 @@ def test_an_undetermined_post_is_completed_by_contacts_on_its_other_side():
     assert fit.sensitivity < 0.1 * one_sided.sensitivity
 
 
+def _one_sided_post(far_tips: np.ndarray):
+    """Link bodies touching a post r 0.06 m (axis z) along one side, and tips elsewhere."""
+    r, w_tip, w_link = 0.06, 0.02, 0.03
+    phi = np.radians(np.linspace(-10.0, 10.0, 8))
+    z = np.linspace(0.1, 0.5, 8)
+    centre = np.stack([(r + w_link) * np.cos(phi), (r + w_link) * np.sin(phi), z], axis=1)
+    along = np.stack([-np.sin(phi), np.cos(phi), np.zeros(8)], axis=1)
+    data = FitData.create(far_tips, w_tip, 1.0, centre - 0.1 * along, centre + 0.1 * along,
+                          w_link, 1.0, free_points=np.array([[0.5, 0.0, 0.3]]), dim=3)
+    true = {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]), "radius": r}
+    return data, true
+
+
+def test_a_contact_that_bends_a_barely_determined_post_is_dropped_and_one_that_pins_it_kept():
+    """Link bodies along one side of a post leave a family of cylinders; a single contact on
+    the other side picks one.  A wrong one (1.3 mm off the post: a body contact taken as a
+    tip) bends the fit through it; the fit without it explains the three true tips there far
+    better and leaves it 1.3 mm off, so it goes.  The only tip on the far side has a large
+    deletion residual too (without it the fit drifts along the family), but the others fit no
+    better without it: it stays."""
+    from fit_synth import param_error
+
+    from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.segment import _drop_outliers
+
+    r, w_tip = 0.06, 0.02
+    far = np.radians([160.0, 180.0, 200.0])
+    tips = np.stack([(r + w_tip) * np.cos(far), (r + w_tip) * np.sin(far), [0.2, 0.3, 0.4]],
+                    axis=1)
+    wrong = np.array([[-(r + w_tip + 0.0013) * np.cos(np.radians(10.0)),
+                       -(r + w_tip + 0.0013) * np.sin(np.radians(10.0)), 0.35]])
+    data, true = _one_sided_post(np.vstack([tips, wrong]))
+    every = np.arange(data.n_contacts)
+    bent = fit_primitive("cylinder", data, free_side=1.0, initial=true)
+    assert bent
+    assert param_error("cylinder", bent.params, true) > 1e-4
+    fit, members = _drop_outliers(bent, every, data, tol=5e-4)
+    assert members.tolist() == [0, 1, 2, *range(4, data.n_contacts)]  # the wrong tip (3) gone
+    assert param_error("cylinder", fit.params, true) < 1e-6
+
+    data, true = _one_sided_post(tips[1:2])  # one far tip pins the post
+    every = np.arange(data.n_contacts)
+    pinned = fit_primitive("cylinder", data, free_side=1.0, initial=true)
+    fit, members = _drop_outliers(pinned, every, data, tol=5e-4)
+    assert members.tolist() == every.tolist()
+    assert param_error("cylinder", fit.params, true) < 1e-6
+
+
 def test_a_seed_of_link_contacts_from_one_sweep_plane_is_extended_until_determined():
     """Link bodies swept in one vertical plane are all tangent to a vertical post at the same
     distance from their plane, so the seven nearest (mostly one plane) fit a whole family of
