@@ -379,8 +379,15 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
         if k in refit_needed:
             again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side,
                                   initial=dict(fit.params))
-            if again:
-                fit = again
+            if not again:
+                again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side)
+            if not again:
+                # (the fit it had was on another set of contacts: the second look's, or before
+                # the outer-end contacts were switched to tips)
+                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
+                                f"refit on them failed ({again.message})")
+                continue
+            fit = again
         groups.append((fit, members))
     groups, n_merged = _merge_coincident(groups, data, seg.noise)
     if n_merged:
