@@ -12,6 +12,18 @@ from wholearm_tools.errors import InputError
 from wholearm_tools.pipeline import duplicate_groups, fit_table
 
 
+def _spatial_without_probes():
+    """paper_spatial without tip probes of link contacts: the setting of the runs the cases
+    below were found on (before the probes were the scenario's; with the option off the
+    simulator draws the same random numbers as it did then)."""
+    import dataclasses
+
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    sc = load_scenario("paper_spatial")
+    return dataclasses.replace(sc, strategy_params={**sc.strategy_params, "probe_links": 0.0})
+
+
 def _table(tips: np.ndarray, links: tuple[np.ndarray, np.ndarray] | None = None,
            radius: float = 0.01) -> ContactTable:
     """A contact table of tip contacts (and optional link contacts), all confidently labelled.
@@ -298,10 +310,8 @@ def test_links_moving_in_one_plane_make_no_plane():
     at most of its contacts is not reported."""
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
-    from wholearm_tools.sim.scenarios import load_scenario
 
-    rec = reconstruct(load_scenario("paper_spatial").simulate(seed=1, duration=40.0).run,
-                      B=0.04)
+    rec = reconstruct(_spatial_without_probes().simulate(seed=1, duration=40.0).run, B=0.04)
     ev = evaluate(rec)
     assert any(a.kind == "plane" and a.type_correct for a in ev.primitives)  # the floor
     for a in ev.primitives:
@@ -459,9 +469,8 @@ def test_a_post_touched_along_one_side_is_completed_by_its_other_contacts():
     one refit also explains, the post is reported within 0.1 % of its radius."""
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
-    from wholearm_tools.sim.scenarios import load_scenario
 
-    sc = load_scenario("paper_spatial")
+    sc = _spatial_without_probes()
     rec = reconstruct(sc.simulate(seed=0, duration=90.0).run, B=float(sc.hints["B"]))
     ev = evaluate(rec)
     posts = [a for a in ev.primitives if a.kind == "cylinder"]
@@ -503,9 +512,8 @@ def test_a_post_the_arm_passed_through_is_not_reported():
     crossing check would too); the floor and the sphere stay."""
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
-    from wholearm_tools.sim.scenarios import load_scenario
 
-    sc = load_scenario("paper_spatial")
+    sc = _spatial_without_probes()
     rec = reconstruct(sc.simulate(seed=5, duration=180.0).run, B=float(sc.hints["B"]))
     ev = evaluate(rec)
     assert sorted(a.kind for a in ev.primitives) == ["plane", "sphere"]
@@ -520,15 +528,13 @@ def test_a_ball_the_arm_passed_through_does_not_take_the_contacts_of_two_surface
     fit-and-grow selected neither surface.  The arm swept through that sphere's body between
     its contacts thousands of times: ruled out while selecting, it leaves post 1 and the ball
     to be found."""
-    import dataclasses
 
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
     from wholearm_tools.sim.scenarios import load_scenario
 
-    sc = load_scenario("paper_spatial")
-    sc = dataclasses.replace(sc, strategy_params={**sc.strategy_params, "probe_links": 1.0})
-    rec = reconstruct(sc.simulate(seed=1, duration=240.0).run, B=float(sc.hints["B"]))
+    sc = load_scenario("paper_spatial")  # 240 s with tip probes, the scenario's setting
+    rec = reconstruct(sc.simulate(seed=1).run, B=float(sc.hints["B"]))
     ev = evaluate(rec)
     found = {a.truth_id: a for a in ev.primitives if a.type_correct}
     assert {1, 3} <= set(found)  # post 1 and the ball
@@ -538,6 +544,9 @@ def test_a_ball_the_arm_passed_through_does_not_take_the_contacts_of_two_surface
     assert not any(a.kind == "sphere" and a.size_fit > 0.2 for a in ev.primitives)
     # a plane through six of post 1's link contacts and a stray tip is dissolved into the post
     assert all(a.type_correct for a in ev.primitives)
+    # (post 2, bent 16 % too large by a body contact taken as a tip, is not reported: without
+    # that contact its 16 contacts fall just short of the report's identifiability level)
+    assert all(abs(a.size_error_pct) < 0.1 for a in ev.primitives if a.size_error_pct is not None)
     assert any("a plane on 7 contacts not reported: another primitive explains 6" in m
                for m in rec.messages)
 
@@ -549,15 +558,33 @@ def test_a_second_look_primitive_whose_refit_fails_is_not_carried_with_another_f
     met eight contacts: at a laxer report level (3e-4 of the scene size) the map writer raised
     ValueError.  The refit is retried cold, and a primitive that cannot be refitted on its
     own contacts is not reported."""
-    import dataclasses
 
     from wholearm_tools import pipeline
     from wholearm_tools.report.metrics import evaluate
-    from wholearm_tools.sim.scenarios import load_scenario
 
     monkeypatch.setattr(pipeline, "REPORT_ID_NOISE", 3e-4)
-    sc = load_scenario("paper_spatial")
-    sc = dataclasses.replace(sc, strategy_params={**sc.strategy_params, "probe_links": 0.0})
+    sc = _spatial_without_probes()
     rec = pipeline.reconstruct(sc.simulate(seed=13, duration=40.0).run, B=float(sc.hints["B"]))
     assert any("found among unexplained contacts" in m for m in rec.messages)
     assert all(a.type_correct for a in evaluate(rec).primitives)
+
+
+def test_the_default_paper_spatial_run_finds_every_surface():
+    """The paper_spatial scenario as bundled (seed 0: 240 s, tip probes of link contacts):
+    the floor, both posts and the ball, each within 0.1 % of its radius and 0.1 mm RMS of its
+    surface.  Post 2 comes out of the second look (ambiguous contacts as the other class) on
+    seven members that are only five contacts, both versions of two of them; completed by the
+    leftovers one refit also explains, it takes twelve."""
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.report.metrics import evaluate
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    sc = load_scenario("paper_spatial")
+    rec = reconstruct(sc.simulate().run, B=float(sc.hints["B"]))
+    ev = evaluate(rec)
+    assert sorted(a.truth_id for a in ev.primitives if a.type_correct) == [0, 1, 2, 3]
+    assert len(ev.primitives) == 4
+    for a in ev.primitives:
+        assert a.surface_rms < 1e-4, (a.kind, a.surface_rms)
+        if a.size_error_pct is not None:
+            assert abs(a.size_error_pct) < 0.1, (a.kind, a.size_error_pct)

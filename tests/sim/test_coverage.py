@@ -196,20 +196,20 @@ def test_lab_sharp_default_run_covers_both_circles() -> None:
 
 
 def test_paper_spatial_first_minute_touches_plane_and_both_posts() -> None:
-    plane, post1, post2, sphere = _default_run_coverage_short("paper_spatial", 60.0)
+    """Without tip probes (the scenario's setting when this was written; the probes spend arm
+    time pushing the tip through link contacts, and the bundled run is 240 s for it:
+    tests/test_pipeline.py checks what that run reconstructs)."""
+    import dataclasses
+
+    sc = load_scenario("paper_spatial")
+    sc = dataclasses.replace(sc, strategy_params={**sc.strategy_params, "probe_links": 0.0})
+    plane, post1, post2, _sphere = surface_coverage(sc.simulate(duration=60.0).truth)
     assert plane.count >= 10
     for post in (post1, post2):
         assert post.count >= 5
         assert post.arc is not None
         assert post.arc >= 60
-    # the sphere is first touched after 60 s on seed 0 (5 contacts over 175 deg in the default
-    # 120 s run, too slow for a unit test); see docs/simulator.md
-    assert sphere.count >= 0
-
-
-def _default_run_coverage_short(name: str, duration: float) -> list:
-    res = load_scenario(name).simulate(duration=duration)
-    return surface_coverage(res.truth)
+    # (the sphere is first touched after 60 s on seed 0: see docs/simulator.md)
 
 
 def test_frontier_crowding_counts_blocked_tips_near_the_tip_path() -> None:
