@@ -330,7 +330,8 @@ def test_links_moving_in_one_plane_make_no_plane():
     # covered by tests/fit/test_crossing.py only: no well_junction run of seeds 0-20 at 30 s
     # makes such a plane any more)
     # four tips at one spot on the left wall and one on the top wall: a circle r 0.25 m
-    # around the base, 124 mm RMS from the wall, 77 % of the motion outside it
+    # around the base, 124 mm RMS from the wall, 77 % of the motion outside it (the tip on
+    # the top wall bends it: that rule now leaves it out before the crossing check is asked)
     ("lab_circle", 15, 20.0, 0.02, "circle"),
 ])
 def test_a_surface_the_arm_passed_through_between_its_contacts_is_not_reported(
@@ -346,7 +347,8 @@ def test_a_surface_the_arm_passed_through_between_its_contacts_is_not_reported(
     ev = evaluate(rec)
     for a in ev.primitives:
         assert a.type_correct, a.kind
-    assert any(f"a {kind} on" in m and ("passed through it" in m or "went through it" in m)
+    assert any(f"a {kind} on" in m and ("passed through it" in m or "went through it" in m
+                                        or "that bent it" in m)
                for m in rec.messages)
 
 
@@ -588,3 +590,22 @@ def test_the_default_paper_spatial_run_finds_every_surface():
         assert a.surface_rms < 1e-4, (a.kind, a.surface_rms)
         if a.size_error_pct is not None:
             assert abs(a.size_error_pct) < 0.1, (a.kind, a.size_error_pct)
+
+
+def test_a_primitive_a_wrong_contact_bends_is_not_reported_bent():
+    """The bundled paper_spatial run, seed 12: seven contacts fit post 1 12 % too large; one of
+    them is a tip taken as a link contact, 2.8 mm off the post, and the six others pin the
+    post without it (the fit without it leaves it far off and explains the others far
+    better).  Left out, too few contacts remain for a cylinder: it is not reported, rather
+    than reported 12 % off."""
+    from wholearm_tools.pipeline import reconstruct
+    from wholearm_tools.report.metrics import evaluate
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    sc = load_scenario("paper_spatial")
+    rec = reconstruct(sc.simulate(seed=12).run, B=float(sc.hints["B"]))
+    ev = evaluate(rec)
+    assert all(a.type_correct for a in ev.primitives)
+    assert all(abs(a.size_error_pct) < 1.0 for a in ev.primitives if a.size_error_pct is not None)
+    assert any("cylinder on 7 contacts not reported: without the 1 that bent it" in m
+               for m in rec.messages)

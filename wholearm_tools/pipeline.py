@@ -276,7 +276,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     from wholearm_tools.fit import crossing, fit_primitive, segment
     from wholearm_tools.fit.core import sweep_tolerance
     from wholearm_tools.fit.models import MODELS
-    from wholearm_tools.fit.segment import complete_support
+    from wholearm_tools.fit.segment import complete_support, drop_bending
     from wholearm_tools.mesh import support_extent
 
     dim = 2 if planar else 3
@@ -400,7 +400,30 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     # contacts no primitive explains (fit-data indices), which an undetermined one may take
     free = np.setdiff1d(np.arange(data.n_contacts),
                         np.concatenate([m for _, m in groups] or [np.zeros(0, dtype=int)]))
+    # (off by more than the noise and than the kinematic errors a reported primitive must hold
+    # at: a few micrometres off a line of four tips is no bending contact)
+    bend_tol = max(BENDING_SIGMAS * seg.noise, REPORT_ID_NOISE * seg.extent)
     for fit, members in groups:
+        # a wrong contact (a body contact taken as a tip) a barely determined primitive bends
+        # through: its own contacts show it, the fit without it leaves it far off
+        fit, kept = drop_bending(fit, members, data, bend_tol, min_keep=MODELS[fit.kind].dof + 1)
+        if len(kept) < len(members):
+            bent = np.setdiff1d(members, kept)
+            if len(kept) < MODELS[fit.kind].dof + 2:
+                # too few left: the contacts no primitive explains may complete it
+                fit, more = complete_support(fit, kept, data, free, seg.noise,
+                                             reach=COMPLETE_REACH, min_outlier=bend_tol)
+                if len(more) < MODELS[fit.kind].dof + 2:
+                    free = np.union1d(free, bent)
+                    messages.append(f"a {fit.kind} on {len(members)} contacts not reported: "
+                                    f"without the {len(bent)} that bent it too few are left "
+                                    f"({len(kept)})")
+                    continue
+                free = np.setdiff1d(free, more)
+                kept = more
+            free = np.union1d(free, np.setdiff1d(bent, kept))
+            messages.append(f"{len(bent)} contact(s) that bent a {fit.kind} left out of it")
+            members = kept
         if loss != "linear":
             # final refit of the segment with the robust loss, so contacts that the
             # classification got wrong pull less on the parameters
@@ -413,7 +436,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                                 "kept the least-squares fit")
         if not seg.determined(fit, REPORT_ID_NOISE):
             more, members_more = complete_support(fit, members, data, free, seg.noise,
-                                                  reach=COMPLETE_REACH)
+                                                  reach=COMPLETE_REACH, min_outlier=bend_tol)
             if len(members_more) == len(members) or not seg.determined(more, REPORT_ID_NOISE):
                 messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
                                 "contacts do not determine every parameter at "
@@ -560,6 +583,12 @@ def link_candidates(robot: RobotModel, contacts: Any) -> LinkCandidates:
 #: (0.3-0.6 mm here) the limit is 330-670: all but the 222 go, the 174 stays; 1e-3 would drop
 #: a right post too.
 REPORT_ID_NOISE = 5e-4
+
+#: a member of a reported primitive is left out when the refit without it leaves it more than
+#: this many sigma (and REPORT_ID_NOISE of the scene size) off and explains the others at least
+#: twice as well
+#: (:func:`wholearm_tools.fit.segment.drop_bending`)
+BENDING_SIGMAS = 5.0
 
 #: how far (metres) a contact may lie from a primitive its contacts do not determine to be
 #: tried as one more of its contacts (:func:`wholearm_tools.fit.segment.complete_support`)

@@ -242,7 +242,7 @@ def test_a_contact_that_bends_a_barely_determined_post_is_dropped_and_one_that_p
     from fit_synth import param_error
 
     from wholearm_tools.fit import fit_primitive
-    from wholearm_tools.fit.segment import _drop_outliers
+    from wholearm_tools.fit.segment import drop_bending
 
     r, w_tip = 0.06, 0.02
     far = np.radians([160.0, 180.0, 200.0])
@@ -255,14 +255,14 @@ def test_a_contact_that_bends_a_barely_determined_post_is_dropped_and_one_that_p
     bent = fit_primitive("cylinder", data, free_side=1.0, initial=true)
     assert bent
     assert param_error("cylinder", bent.params, true) > 1e-4
-    fit, members = _drop_outliers(bent, every, data, tol=5e-4)
+    fit, members = drop_bending(bent, every, data, tol=5e-4)
     assert members.tolist() == [0, 1, 2, *range(4, data.n_contacts)]  # the wrong tip (3) gone
     assert param_error("cylinder", fit.params, true) < 1e-6
 
     data, true = _one_sided_post(tips[1:2])  # one far tip pins the post
     every = np.arange(data.n_contacts)
     pinned = fit_primitive("cylinder", data, free_side=1.0, initial=true)
-    fit, members = _drop_outliers(pinned, every, data, tol=5e-4)
+    fit, members = drop_bending(pinned, every, data, tol=5e-4)
     assert members.tolist() == every.tolist()
     assert param_error("cylinder", fit.params, true) < 1e-6
 

@@ -358,7 +358,7 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
 def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
                      candidates: np.ndarray, sigma: float, reach: float = 0.02,
                      starts: int = 8, min_new: int = 2, outlier: float = 5.0,
-                     ) -> tuple[FitResult, np.ndarray]:
+                     min_outlier: float = 0.0) -> tuple[FitResult, np.ndarray]:
     """``fit`` (on the contacts ``members`` of ``data``) grown by those of ``candidates`` that
     one refit explains with it.  Returns the fit and its members, unchanged unless at least
     ``min_new`` contacts join.
@@ -378,8 +378,9 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
     on its other side stayed unexplained.
 
     Bent that far, the fit can also pass through a wrong contact: a member (taken or its own)
-    that the refit without it leaves more than ``outlier`` sigma off is dropped again
-    (:func:`_drop_outliers`).  On paper_spatial (seed 1, 240 s, tip probes) a body contact used
+    that the refit without it leaves more than ``outlier`` sigma (and ``min_outlier``
+    metres) off is dropped again
+    (:func:`drop_bending`).  On paper_spatial (seed 1, 240 s, tip probes) a body contact used
     as a tip, 1.3 mm off post 2, had bent it to a radius 16 % too large."""
     cand = np.asarray(candidates, dtype=np.int64)
     if cand.size == 0:
@@ -420,7 +421,7 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
     f, m = best_fit, best_members
     taken = m
     while True:
-        f_out, m_out = _drop_outliers(f, m, data, outlier * sigma)
+        f_out, m_out = drop_bending(f, m, data, max(outlier * sigma, min_outlier))
         if len(m_out) == len(m):
             break
         # the fit without them is another one: it may take contacts the bent one could not
@@ -432,19 +433,20 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
     return f, m
 
 
-def _drop_outliers(fit: FitResult, members: np.ndarray, data: FitData, tol: float,
-                   ) -> tuple[FitResult, np.ndarray]:
+def drop_bending(fit: FitResult, members: np.ndarray, data: FitData, tol: float,
+                 min_keep: int | None = None) -> tuple[FitResult, np.ndarray]:
     """``fit`` without the members that bend it: the refit without such a member leaves it
     more than ``tol`` off (its deletion residual) and explains the others at least twice as
     well (dof-corrected RMS).  The worst goes first, one at a time, while more than
-    ``dof + 2`` remain.
+    ``min_keep`` (default ``dof + 2``) remain.
 
     A fit its contacts barely determine bends to pass through a wrong contact as well (a body
     contact taken as a tip): its residual there is small, but the fit without it is the
     surface, and leaves it far off.  (A contact that only determines the fit - without it the
     refit drifts along a family of solutions - also has a large deletion residual, but the
     others fit no better without it.)"""
-    while len(members) > MODELS[fit.kind].dof + 2:
+    keep_at_least = MODELS[fit.kind].dof + 2 if min_keep is None else min_keep
+    while len(members) > keep_at_least:
         worst, worst_r, worst_fit = -1, tol, None
         for i in range(len(members)):
             keep = np.delete(members, i)
