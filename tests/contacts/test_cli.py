@@ -20,7 +20,8 @@ def run(*args: str):
 @pytest.fixture(scope="module")
 def mcap(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("run") / "run.mcap"
-    res = run("simulate", "lab_circle", "-o", str(out), "--duration", "12", "--seed", "1")
+    # 20 s: at 12 s the five contacts on the circle fit one r 0.22 m through a bending one
+    res = run("simulate", "lab_circle", "-o", str(out), "--duration", "20", "--seed", "1")
     assert res.exit_code == 0, res.output
     return out
 
@@ -49,7 +50,12 @@ def test_fit_reads_the_contacts_csv(mcap: Path, tmp_path: Path) -> None:
     assert run("contacts", str(mcap), "--B", "0.02", "-o", str(out)).exit_code == 0
     res = run("fit", str(out), "-o", str(tmp_path / "map.json"))
     assert res.exit_code == 0, res.output
-    assert json.loads((tmp_path / "map.json").read_text())["format"] == "wholearm-map"
+    m = json.loads((tmp_path / "map.json").read_text())
+    assert m["format"] == "wholearm-map"
+    circles = [p for p in m["primitives"] if p["type"] == "circle"]
+    assert len(circles) == 1  # the post r 0.06 m at (0.38, 0.24)
+    assert circles[0]["params"]["radius"] == pytest.approx(0.06, rel=0.01)
+    assert circles[0]["params"]["center"] == pytest.approx([0.38, 0.24], abs=1e-3)
 
 
 def test_contacts_parquet_holds_the_csv_columns_typed(mcap: Path, tmp_path: Path) -> None:
