@@ -11,7 +11,9 @@ Columns: ``true`` = true surfaces; ``touched`` = surfaces with at least one true
 ``dof-cov`` = touched surfaces whose distinct contacts consistent with them as used (true
 surface residual < 1 mm) reach the type's ``dof + 2`` (what fit-and-grow needs to report a
 primitive: below it the simulator's coverage is the limit, not the fit); ``found`` = touched
-surfaces matched by a primitive of the right type; ``extra`` = primitives matched to no
+surfaces matched by a primitive of the right type; ``off`` = found surfaces none of whose
+primitives is within 5 % of the radius and 5 mm RMS of the surface (found, but wrong in size or
+place); ``extra`` = primitives matched to no
 surface or of the wrong type; ``size %`` =
 radius (major radius) error in percent per found curved surface; ``angle`` = axis / normal angle
 error in degrees; ``srms`` = RMS distance of the fitted surface, sampled over its extent, to the
@@ -37,6 +39,8 @@ from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact
 from wholearm_tools.sim.scenarios import load_scenario
 
 SCENARIOS = ("lab_circle", "lab_sharp", "paper_planar", "paper_spatial", "well_junction")
+#: a found surface is ``off`` unless one of its primitives is within these of it
+OFF_SIZE_PCT, OFF_RMS = 5.0, 5e-3
 
 
 def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
@@ -80,6 +84,13 @@ def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
               if cov[i] >= MODELS[surfaces[i].kind].dof + 2]
     found = [s for s in ev.surfaces if s.touched and s.found]
     good = [a for a in ev.primitives if a.type_correct]
+    by_id = {a.primitive_id: a for a in ev.primitives}
+
+    def close(a) -> bool:
+        return ((a.size_error_pct is None or abs(a.size_error_pct) <= OFF_SIZE_PCT)
+                and (a.surface_rms is None or a.surface_rms <= OFF_RMS))
+
+    off = [s for s in found if not any(close(by_id[p]) for p in s.found_by)]
     c, cm = ev.classification, ev.classification_map
     return {
         "link_acc": c.link_accuracy, "cls_acc": c.class_accuracy, "amb": c.ambiguous_fraction,
@@ -87,7 +98,7 @@ def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
         "cls_acc_map": cm.class_accuracy if cm else float("nan"),
         "amb_map": cm.ambiguous_fraction if cm else float("nan"),
         "true": len(ev.surfaces), "touched": len(touched), "dof_cov": len(enough),
-        "found": len(found), "found_kinds": sorted(s.kind for s in found),
+        "found": len(found), "found_kinds": sorted(s.kind for s in found), "off": len(off),
         "n_prims": len(ev.primitives),
         "extra": sum(1 for a in ev.primitives if not a.type_correct)
         + (len(good) - len({a.truth_id for a in good})),
@@ -144,11 +155,11 @@ def main() -> None:
 
     print("\n## Primitives found (tip + link data)\n")
     print(f"{'scenario':<14}{'seed':>4}{'arm s':>7}{'cont':>6}{'true':>5}{'touch':>6}"
-          f"{'dofcov':>7}{'found':>6}{'extra':>6}  {'found types':<34}{'size %':<16}"
+          f"{'dofcov':>7}{'found':>6}{'off':>4}{'extra':>6}  {'found types':<34}{'size %':<16}"
           f"{'angle deg':<18}{'srms mm':<16}")
     for name, seed, _, dur, n, _, _, b, _, _, _ in rows:
         print(f"{name:<14}{seed:>4}{dur:>7.0f}{n:>6}{b['true']:>5}{b['touched']:>6}"
-              f"{b['dof_cov']:>7}{b['found']:>6}{b['extra']:>6}  "
+              f"{b['dof_cov']:>7}{b['found']:>6}{b['off']:>4}{b['extra']:>6}  "
               f"{','.join(b['found_kinds']):<34}{_fmt(b['size_pct']):<16}"
               f"{_fmt(b['angle']):<18}{_fmt(b['srms_mm']):<16}")
 
