@@ -412,7 +412,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
             if len(kept) < MODELS[fit.kind].dof + 2:
                 # too few left: the contacts no primitive explains may complete it
                 fit, more = complete_support(fit, kept, data, free, seg.noise,
-                                             reach=COMPLETE_REACH, min_outlier=bend_tol)
+                                             reach=COMPLETE_REACH, outlier_tol=bend_tol)
                 if len(more) < MODELS[fit.kind].dof + 2:
                     free = np.union1d(free, bent)
                     messages.append(f"a {fit.kind} on {len(members)} contacts not reported: "
@@ -436,7 +436,7 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                                 "kept the least-squares fit")
         if not seg.determined(fit, REPORT_ID_NOISE):
             more, members_more = complete_support(fit, members, data, free, seg.noise,
-                                                  reach=COMPLETE_REACH, min_outlier=bend_tol)
+                                                  reach=COMPLETE_REACH, outlier_tol=bend_tol)
             if len(members_more) == len(members) or not seg.determined(more, REPORT_ID_NOISE):
                 messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
                                 "contacts do not determine every parameter at "
@@ -586,8 +586,7 @@ REPORT_ID_NOISE = 5e-4
 
 #: a member of a reported primitive is left out when the refit without it leaves it more than
 #: this many sigma (and REPORT_ID_NOISE of the scene size) off and explains the others at least
-#: twice as well
-#: (:func:`wholearm_tools.fit.segment.drop_bending`)
+#: twice as well (:func:`wholearm_tools.fit.segment.drop_bending`)
 BENDING_SIGMAS = 5.0
 
 #: how far (metres) a contact may lie from a primitive its contacts do not determine to be
@@ -690,15 +689,11 @@ def _refit_explaining(fit: Any, members: NDArray, data: Any, sigma: float) -> An
     """``fit`` refitted (warm start) to the contacts ``members``, or None unless it explains
     them all: dof-corrected RMS residual at most 1.5 ``sigma`` (the chi-square level)."""
     from wholearm_tools.fit import fit_primitive
-    from wholearm_tools.fit.models import MODELS
+    from wholearm_tools.fit.segment import rms_dof
 
     again = fit_primitive(fit.kind, data.take(members), free_side=fit.free_side,
                           initial=dict(fit.params))
-    if not again:
-        return None
-    r = np.asarray(again.residuals)
-    dof = max(len(r) - MODELS[fit.kind].dof, 1)
-    return again if float(np.sqrt(np.sum(r * r) / dof)) <= 1.5 * sigma else None
+    return again if again and rms_dof(again) <= 1.5 * sigma else None
 
 
 def _merge_coincident(groups: list[tuple[Any, NDArray]], data: Any, sigma: float,

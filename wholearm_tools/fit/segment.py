@@ -131,7 +131,8 @@ class _Hyp:
     members: np.ndarray  # sorted contact indices
 
 
-def _rms_dof(fit: FitResult) -> float:
+def rms_dof(fit: FitResult) -> float:
+    """Dof-corrected RMS residual of ``fit``: sqrt(sum r^2 / (n - dof)), n - dof at least 1."""
     r = fit.residuals
     dof = MODELS[fit.kind].dof
     return float(np.sqrt(np.sum(r * r) / max(len(r) - dof, 1)))
@@ -310,7 +311,7 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
                 else None)
         f = fit_primitive(kind, take(members), max_iter=cfg.max_iter, good_rms=good)
         while (cfg.trim_ok and len(members) > size and f
-               and _rms_dof(f) > cfg.accept * cfg.sigma):
+               and rms_dof(f) > cfg.accept * cfg.sigma):
             r = np.abs(f.residuals)
             r[members == job.seed] = -1.0
             keep = np.delete(members, int(np.argmax(r)))
@@ -332,7 +333,7 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
         # fit stays good, until they determine it: refitting from a member of the family moves
         # along it to the one the new contact also touches, where a fresh fit to the larger
         # neighbourhood falls into another minimum
-        if _rms_dof(f) > cfg.accept * cfg.sigma:
+        if rms_dof(f) > cfg.accept * cfg.sigma:
             return members, f
         for c in job.near[cfg.sizes[kind] + job.trim:]:
             if c in members:
@@ -340,7 +341,7 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
             cand = np.sort(np.append(members, c))
             g = fit_primitive(kind, take(cand), max_iter=cfg.max_iter, free_side=f.free_side,
                               initial=f.params)
-            if g and _rms_dof(g) <= 1.5 * cfg.sigma:
+            if g and rms_dof(g) <= 1.5 * cfg.sigma:
                 members, f = cand, g
                 if f.sensitivity <= cfg.max_sensitivity:
                     break
@@ -349,7 +350,7 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
     fits = [(k, *one(k, job.trim)) for k in cfg.cheap]
     # (only in the consensus pass: before it, most seeds next to an intersection straddle two
     # surfaces, and a torus fits almost any such small mix)
-    if cfg.costly and job.trim and not any(f and _rms_dof(f) <= cfg.accept * cfg.sigma
+    if cfg.costly and job.trim and not any(f and rms_dof(f) <= cfg.accept * cfg.sigma
                                            for _, _, f in fits):
         fits += [(k, *one(k, 0)) for k in cfg.costly]
     return fits
@@ -357,8 +358,8 @@ def _fit_seed(cfg: _SeedConfig, job: _SeedJob) -> list[tuple[str, np.ndarray, Fi
 
 def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
                      candidates: np.ndarray, sigma: float, reach: float = 0.02,
-                     starts: int = 8, min_new: int = 2, outlier: float = 5.0,
-                     min_outlier: float = 0.0) -> tuple[FitResult, np.ndarray]:
+                     starts: int = 8, min_new: int = 2, outlier_tol: float | None = None,
+                     ) -> tuple[FitResult, np.ndarray]:
     """``fit`` (on the contacts ``members`` of ``data``) grown by those of ``candidates`` that
     one refit explains with it.  Returns the fit and its members, unchanged unless at least
     ``min_new`` contacts join.
@@ -378,10 +379,10 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
     on its other side stayed unexplained.
 
     Bent that far, the fit can also pass through a wrong contact: a member (taken or its own)
-    that the refit without it leaves more than ``outlier`` sigma (and ``min_outlier``
-    metres) off is dropped again
-    (:func:`drop_bending`).  On paper_spatial (seed 1, 240 s, tip probes) a body contact used
-    as a tip, 1.3 mm off post 2, had bent it to a radius 16 % too large."""
+    that the refit without it leaves more than ``outlier_tol`` metres (default 5 ``sigma``)
+    off is dropped again (:func:`drop_bending`).  On paper_spatial (seed 1, 240 s, tip
+    probes) a body contact used as a tip, 1.3 mm off post 2, had bent it to a radius 16 % too
+    large."""
     cand = np.asarray(candidates, dtype=np.int64)
     if cand.size == 0:
         return fit, members
@@ -391,7 +392,7 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
     def refit(f: FitResult, idx: np.ndarray) -> FitResult | None:
         out = fit_primitive(f.kind, data.take(idx), free_side=f.free_side,
                             initial=dict(f.params))
-        return out if out and _rms_dof(out) <= 1.5 * sigma else None
+        return out if out and rms_dof(out) <= 1.5 * sigma else None
 
     def gather(f: FitResult, m: np.ndarray, left: np.ndarray) -> tuple[FitResult, np.ndarray]:
         while left.size:
@@ -414,14 +415,15 @@ def complete_support(fit: FitResult, members: np.ndarray, data: FitData,
             continue
         f, m = gather(f, m, cand[cand != first])
         if len(m) > len(best_members) or (len(m) == len(best_members) and best_fit is not fit
-                                         and _rms_dof(f) < _rms_dof(best_fit)):
+                                         and rms_dof(f) < rms_dof(best_fit)):
             best_fit, best_members = f, m
     if len(best_members) - len(members) < min_new:
         return fit, members
     f, m = best_fit, best_members
     taken = m
+    tol = 5.0 * sigma if outlier_tol is None else outlier_tol
     while True:
-        f_out, m_out = drop_bending(f, m, data, max(outlier * sigma, min_outlier))
+        f_out, m_out = drop_bending(f, m, data, tol)
         if len(m_out) == len(m):
             break
         # the fit without them is another one: it may take contacts the bent one could not
@@ -452,7 +454,7 @@ def drop_bending(fit: FitResult, members: np.ndarray, data: FitData, tol: float,
             keep = np.delete(members, i)
             g = fit_primitive(fit.kind, data.take(keep), free_side=fit.free_side,
                               initial=dict(fit.params))
-            if not g or _rms_dof(g) > 0.5 * _rms_dof(fit):
+            if not g or rms_dof(g) > 0.5 * rms_dof(fit):
                 continue  # (the others do not agree any better without it)
             r = abs(float(residuals(fit.kind, g.params, data.take(members[i:i + 1]),
                                     fit.free_side)[0]))
@@ -613,7 +615,7 @@ def segment(
     seed_fits = seeds_at(seeds, 0)
 
     if noise is None:
-        best = [min((_rms_dof(f) for _, _, f in fits if f), default=np.inf)
+        best = [min((rms_dof(f) for _, _, f in fits if f), default=np.inf)
                 for fits in seed_fits]
         finite = np.array([b for b in best if np.isfinite(b)])
         # seeds have dof + 2 contacts: the dof-corrected RMS of a seed inside one surface is
@@ -647,7 +649,7 @@ def segment(
             return False
         if (noise_floor > 0 and len(fit.link_residuals) >= len(fit.tip_residuals)
                 and fit.n_contacts > MODELS[fit.kind].dof + 1
-                and _rms_dof(fit) < 1e-3 * noise_floor):
+                and rms_dof(fit) < 1e-3 * noise_floor):
             # measured contacts carry encoder noise; link contacts fitted a thousand times
             # tighter are an identity of the kinematics (one link's axis always tangent to a
             # sphere about an inner joint), not a surface
@@ -711,7 +713,7 @@ def segment(
                 break
             refit = fit_primitive(kind, data.take(new), free_side=fit.free_side,
                                   initial=fit.params)
-            if not refit or _rms_dof(refit) > 2.0 * sigma:
+            if not refit or rms_dof(refit) > 2.0 * sigma:
                 break
             fit, members = refit, new
         if members.size < min_sup(kind) or not admissible(fit, members):
@@ -728,7 +730,7 @@ def segment(
             if covered[s]:
                 continue
             for kind, members, f in fits:
-                if not f or _rms_dof(f) > seed_accept * sigma:
+                if not f or rms_dof(f) > seed_accept * sigma:
                     continue
                 h = grow(kind, f, members)
                 if h is None:
@@ -742,14 +744,14 @@ def segment(
 
     # seeds the first pass could not use are refitted with trimming (mixed neighbourhoods)
     redo = [i for i, fits in enumerate(seed_fits)
-            if not any(f and _rms_dof(f) <= seed_accept * sigma for _, _, f in fits)]
+            if not any(f and rms_dof(f) <= seed_accept * sigma for _, _, f in fits)]
     if redo:
         again = seeds_at([seeds[i] for i in redo], trim_extra)
         for i, fits in zip(redo, again, strict=True):
             seed_fits[i] = fits
         if noise is None:
             # the consensus seeds are often the only clean ones: lower the estimate to them
-            best = [min((_rms_dof(f) for _, _, f in fits if f), default=np.inf)
+            best = [min((rms_dof(f) for _, _, f in fits if f), default=np.inf)
                     for fits in seed_fits]
             finite = np.array([b for b in best if np.isfinite(b)])
             if finite.size:
