@@ -465,10 +465,12 @@ def test_a_primitive_only_the_outer_ends_of_link_labelled_contacts_touch_is_not_
 
 
 def test_a_post_touched_along_one_side_is_completed_by_its_other_contacts():
-    """90 s of paper_spatial (seed 0): eight link bodies touch post 2 (r 0.06 m) along one
-    side; they fit it 3 mm off, too weakly determined to report, and growth never reaches the
-    post's tips and joint contacts on its other side.  Completed by the unexplained contacts
-    one refit also explains, the post is reported within 0.1 % of its radius."""
+    """90 s of paper_spatial (seed 0): eight link bodies touch post 2 (r 0.05 m) along one
+    side; they fit it 12 % too large, and growth never reaches the post's tips and joint
+    contacts on its other side.  That fit is determined at the report's level, but only with
+    one of its contacts: without it the others leave it free (sensitivity 316 -> 18112), so it
+    is not reported as it is.  Completed by the unexplained contacts one refit also explains,
+    the post is reported within 0.1 % of its radius."""
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
 
@@ -511,17 +513,21 @@ def test_a_post_the_arm_passed_through_is_not_reported():
     a tip fit a tilted cylinder r 0.074 m, matched to post 2 at 268 mm RMS.  The contacts put
     the robot outside it, and the arm swept through its body 257 times between them: a post
     is solid, so it is no primitive (fit-and-grow rules it out as it selects; the report's
-    crossing check would too); the floor and the sphere stay."""
+    crossing check would too); the floor, the sphere and post 1 (reported since the report's
+    identifiability is judged at the arm's reach) stay, each on its surface."""
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.metrics import evaluate
 
     sc = _spatial_without_probes()
     rec = reconstruct(sc.simulate(seed=5, duration=180.0).run, B=float(sc.hints["B"]))
     ev = evaluate(rec)
-    assert sorted(a.kind for a in ev.primitives) == ["plane", "sphere"]
+    assert {"plane", "sphere"} <= {a.kind for a in ev.primitives}
+    assert 2 not in {a.truth_id for a in ev.primitives}  # no post 2
     for a in ev.primitives:
         assert a.type_correct
-        assert a.surface_rms < 1e-4
+        assert a.surface_rms < 5e-4
+        if a.size_error_pct is not None:
+            assert abs(a.size_error_pct) < 0.5
 
 
 def test_a_ball_the_arm_passed_through_does_not_take_the_contacts_of_two_surfaces():
@@ -546,9 +552,12 @@ def test_a_ball_the_arm_passed_through_does_not_take_the_contacts_of_two_surface
     assert not any(a.kind == "sphere" and a.size_fit > 0.2 for a in ev.primitives)
     # a plane through six of post 1's link contacts and a stray tip is dissolved into the post
     assert all(a.type_correct for a in ev.primitives)
-    # (post 2, bent 16 % too large by a body contact taken as a tip, is not reported: without
-    # that contact its 16 contacts fall just short of the report's identifiability level)
-    assert all(abs(a.size_error_pct) < 0.1 for a in ev.primitives if a.size_error_pct is not None)
+    # post 2 was bent 16 % too large by a body contact taken as a tip; without that contact
+    # its 16 contacts determine it at kinematic errors of 5e-4 of the reach (not of the
+    # scene, 1.94 m at 240 s): reported within 0.5 %
+    assert set(found) == {0, 1, 2, 3}
+    assert abs(found[2].size_error_pct) < 0.5
+    assert found[2].surface_rms < 1e-3
     assert any("a plane on 7 contacts not reported: another primitive explains 6" in m
                for m in rec.messages)
 

@@ -244,7 +244,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               free_points: NDArray | None = None, meta: dict[str, Any] | None = None,
               noise_floor: float = DEFAULT_NOISE_FLOOR, merge_duplicates: bool = True,
               sweep: Any = None, base: NDArray | None = None, workers: int | None = None,
-              candidates: LinkCandidates | None = None,
+              candidates: LinkCandidates | None = None, reach: float | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """Fit-and-grow over a contact table → (map, fits, table with assignments, messages).
 
@@ -255,7 +255,9 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     hold it.  ``workers``: processes for the seed fits (None: every core, at most 8; the map
     does not depend on it).  ``candidates`` (:func:`link_candidates`): the links each contact
     may have been on when the joint signals left it open, weighed by the fitted map into the
-    table's ``link_by_map`` (without: the detected link).
+    table's ``link_by_map`` (without: the detected link).  ``reach`` (the robot's reach, m): the
+    length the kinematic errors a reported primitive must be determined at scale with
+    (:data:`REPORT_ID_NOISE`; without: the scene size).
     Poor data never raise: the map is then empty (or short) and ``messages`` say why.
     """
     from wholearm_tools.fit.segment import seed_pool
@@ -264,19 +266,19 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         return _fit_table(table, planar=planar, B=B, kinds=kinds, loss=loss, noise=noise,
                           free_points=free_points, meta=meta, noise_floor=noise_floor,
                           merge_duplicates=merge_duplicates, sweep=sweep, base=base, pool=pool,
-                          candidates=candidates)
+                          candidates=candidates, reach=reach)
 
 
 def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, ...] | None,
                loss: str, noise: float | None, free_points: NDArray | None,
                meta: dict[str, Any] | None, noise_floor: float, merge_duplicates: bool,
                sweep: Any, base: NDArray | None, pool: Executor | None,
-               candidates: LinkCandidates | None = None,
+               candidates: LinkCandidates | None = None, reach: float | None = None,
                ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     from wholearm_tools.fit import crossing, fit_primitive, segment
     from wholearm_tools.fit.core import sweep_tolerance
     from wholearm_tools.fit.models import MODELS
-    from wholearm_tools.fit.segment import complete_support, drop_bending
+    from wholearm_tools.fit.segment import complete_support, drop_bending, pinning_contact
     from wholearm_tools.mesh import support_extent
 
     dim = 2 if planar else 3
@@ -403,6 +405,26 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     # (off by more than the noise and than the kinematic errors a reported primitive must hold
     # at: a few micrometres off a line of four tips is no bending contact)
     bend_tol = max(BENDING_SIGMAS * seg.noise, REPORT_ID_NOISE * seg.extent)
+    # the length kinematic errors scale with: the arm's reach (the scene size without a robot)
+    id_scale, id_of = (reach, "the robot's reach") if reach else (None, "the scene size")
+
+    def weakly_determined(fit: Any, members: NDArray) -> str:
+        """Why ``fit`` may not be reported as determined by ``members`` ('' when it may)."""
+        def determined(g: Any) -> bool:
+            return seg.determined(g, REPORT_ID_NOISE, id_scale)
+
+        if not determined(fit):
+            return (f"its contacts do not determine every parameter at {REPORT_ID_NOISE:g} "
+                    f"of {id_of}")
+        # every class and link is inferred: a primitive that one contact alone determines
+        # is confidently wrong when that contact is (a body contact taken as a tip), and its
+        # residuals cannot show it; without any one contact, the others must still make a
+        # hypothesis fit-and-grow admits
+        if pinning_contact(fit, members, data,
+                           lambda g: seg.determined(g, PIN_ID_NOISE)) is not None:
+            return ("one of its contacts alone determines it (without it the others do not, "
+                    f"even at {PIN_ID_NOISE:g} of the scene size)")
+        return ""
     for fit, members in groups:
         # a wrong contact (a body contact taken as a tip) a barely determined primitive bends
         # through: its own contacts show it, the fit without it leaves it far off
@@ -434,17 +456,19 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
             else:
                 messages.append(f"robust refit of a {fit.kind} failed ({robust.message}); "
                                 "kept the least-squares fit")
-        if not seg.determined(fit, REPORT_ID_NOISE):
+        why = weakly_determined(fit, members)
+        if why:
             more, members_more = complete_support(fit, members, data, free, seg.noise,
                                                   reach=COMPLETE_REACH, outlier_tol=bend_tol)
-            if len(members_more) == len(members) or not seg.determined(more, REPORT_ID_NOISE):
-                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: its "
-                                "contacts do not determine every parameter at "
-                                f"{REPORT_ID_NOISE:g} of the scene size")
+            why_more = (why if len(members_more) == len(members)
+                        else weakly_determined(more, members_more))
+            if why_more:
+                messages.append(f"a {fit.kind} on {len(members)} contacts not reported: "
+                                f"{why_more}")
                 continue
-            messages.append(f"a {fit.kind} on {len(members)} contacts that did not determine "
-                            f"it took {len(members_more) - len(members)} unexplained contacts "
-                            "it also explains once refitted")
+            messages.append(f"a {fit.kind} on {len(members)} contacts took "
+                            f"{len(members_more) - len(members)} unexplained contacts it also "
+                            f"explains once refitted (before, {why})")
             free = np.setdiff1d(free, members_more)
             fit, members = more, members_more
         rows = order[members]
@@ -574,15 +598,24 @@ def link_candidates(robot: RobotModel, contacts: Any) -> LinkCandidates:
         seg_b=seg_b, link_radius=link_radius)
 
 
-#: identifiability noise (fraction of the scene size) a *reported* primitive must be determined
-#: at: fit-and-grow searches with 1e-4 (weakly determined hypotheses may still grow into good
-#: ones); what reaches the map must hold at sub-millimetre kinematic errors.  Evidence
+#: identifiability noise (fraction of the robot's reach; of the scene size when the contacts come
+#: without a robot) a *reported* primitive must be determined at, also without any one of its
+#: contacts: fit-and-grow searches with 1e-4 of the scene size (weakly determined hypotheses may
+#: still grow into good ones); what reaches the map must hold at sub-millimetre kinematic
+#: errors, which scale with the arm's reach, not with how far a run wandered.  The reach
+#: replaced the scene size (which grows with the run: 1.94 m on paper_spatial at 240 s, reach
+#: 0.985 m) when the single-contact check came in; first evidence, at the scene size
 #: (sensitivity = worst parameter std per unit noise, in support spreads): wrong link-only
 #: cylinders beside paper_spatial's posts (47-74 % radius error) 222-487, cylinders and a
 #: plane through a ring of bore contacts 797-16000; the right posts and bores 1-174.  At 5e-4
 #: (0.3-0.6 mm here) the limit is 330-670: all but the 222 go, the 174 stays; 1e-3 would drop
 #: a right post too.
 REPORT_ID_NOISE = 5e-4
+
+#: identifiability noise (fraction of the scene size) a reported primitive must still be
+#: determined at without any one of its contacts: fit-and-grow's own level for a hypothesis
+#: (:func:`wholearm_tools.fit.segment.pinning_contact`)
+PIN_ID_NOISE = 1e-4
 
 #: a member of a reported primitive is left out when the refit without it leaves it more than
 #: this many sigma (and REPORT_ID_NOISE of the scene size) off and explains the others at least
@@ -887,7 +920,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor,
             sweep=robot_sweep(run.robot, np.asarray(run.log.q)) if params.use_sweep else None,
             base=run.robot.base, workers=params.workers,
-            candidates=link_candidates(run.robot, contacts))
+            candidates=link_candidates(run.robot, contacts), reach=float(run.robot.reach))
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

@@ -313,3 +313,28 @@ def test_a_seed_of_link_contacts_from_one_sweep_plane_is_extended_until_determin
     assert len(members) > 7
     assert fit.sensitivity < max_sens
     assert param_error("cylinder", fit.params, true) < 1e-3
+
+
+def test_a_post_only_one_tip_determines_is_pinned_by_it_and_one_three_tips_determine_is_not():
+    """Link bodies along one side of a post leave a family of cylinders.  With one tip on the
+    far side, that tip alone picks the post: were it a body contact taken as a tip, nothing
+    would show it, so it is the pinning contact.  With three far tips, dropping any one
+    contact leaves the post determined."""
+    from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.segment import pinning_contact
+
+    r, w_tip = 0.06, 0.02
+    far = np.radians([160.0, 180.0, 200.0])
+    tips = np.stack([(r + w_tip) * np.cos(far), (r + w_tip) * np.sin(far), [0.2, 0.3, 0.4]],
+                    axis=1)
+
+    def determined(fit):  # worst parameter std below 0.2 support spreads at 10 um noise
+        return fit.sensitivity * 1e-5 <= 0.2
+
+    for far_tips, pin in [(tips[1:2], 0), (tips, None)]:
+        data, true = _one_sided_post(far_tips)
+        every = np.arange(data.n_contacts)
+        fit = fit_primitive("cylinder", data, free_side=1.0, initial=true)
+        assert fit
+        assert determined(fit)
+        assert pinning_contact(fit, every, data, determined) == pin

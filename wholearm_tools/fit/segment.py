@@ -51,7 +51,7 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -105,10 +105,11 @@ class Segmentation:
     extent: float = 0.0
     max_rel_std: float = math.inf
 
-    def determined(self, fit: FitResult, id_noise: float) -> bool:
+    def determined(self, fit: FitResult, id_noise: float, scale: float | None = None) -> bool:
         """Whether every parameter of ``fit`` is determined by its contacts at noise
-        ``max(noise, id_noise x scene size)`` (the identifiability rule of :func:`segment`)."""
-        sigma_id = max(self.noise, id_noise * self.extent)
+        ``max(noise, id_noise x scale)`` (the identifiability rule of :func:`segment`; ``scale``
+        defaults to the scene size)."""
+        sigma_id = max(self.noise, id_noise * (self.extent if scale is None else scale))
         return bool(fit.sensitivity * sigma_id <= self.max_rel_std)
 
     def __post_init__(self) -> None:
@@ -464,6 +465,23 @@ def drop_bending(fit: FitResult, members: np.ndarray, data: FitData, tol: float,
             break
         fit, members = worst_fit, np.delete(members, worst)
     return fit, members
+
+
+def pinning_contact(fit: FitResult, members: np.ndarray, data: FitData,
+                    determined: Callable[[FitResult], bool]) -> int | None:
+    """Position in ``members`` of a contact without which ``fit`` is no longer
+    ``determined`` (None: no single contact pins it).
+
+    Every contact's class (tip or link body) and link are inferred, never measured, so a fit
+    that only one contact determines rests on one inference: if that contact is wrong, its
+    residuals cannot show it (the others leave that direction free) and the fit is confidently
+    wrong.  The refits start from ``fit``."""
+    for i in range(len(members)):
+        g = fit_primitive(fit.kind, data.take(np.delete(members, i)), free_side=fit.free_side,
+                          initial=dict(fit.params))
+        if not g or not determined(g):
+            return i
+    return None
 
 
 def segment(
