@@ -404,9 +404,9 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
                         np.concatenate([m for _, m in groups] or [np.zeros(0, dtype=int)]))
     # (off by more than the noise and than the kinematic errors a reported primitive must hold
     # at: a few micrometres off a line of four tips is no bending contact)
-    bend_tol = max(BENDING_SIGMAS * seg.noise, REPORT_ID_NOISE * seg.extent)
     # the length kinematic errors scale with: the arm's reach (the scene size without a robot)
     id_scale, id_of = (reach, "the robot's reach") if reach else (None, "the scene size")
+    bend_tol = max(BENDING_SIGMAS * seg.noise, REPORT_ID_NOISE * (id_scale or seg.extent))
 
     def weakly_determined(fit: Any, members: NDArray) -> str:
         """Why ``fit`` may not be reported as determined by ``members`` ('' when it may)."""
@@ -618,8 +618,8 @@ REPORT_ID_NOISE = 5e-4
 PIN_ID_NOISE = 1e-4
 
 #: a member of a reported primitive is left out when the refit without it leaves it more than
-#: this many sigma (and REPORT_ID_NOISE of the scene size) off and explains the others at least
-#: twice as well (:func:`wholearm_tools.fit.segment.drop_bending`)
+#: this many sigma (and REPORT_ID_NOISE of the reach, or of the scene size) off and explains the
+#: others at least twice as well (:func:`wholearm_tools.fit.segment.drop_bending`)
 BENDING_SIGMAS = 5.0
 
 #: how far (metres) a contact may lie from a primitive its contacts do not determine to be
