@@ -422,8 +422,8 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
         # hypothesis fit-and-grow admits
         if pinning_contact(fit, members, data,
                            lambda g: seg.determined(g, PIN_ID_NOISE)) is not None:
-            return ("one of its contacts alone determines it (without it the others do not, "
-                    f"even at {PIN_ID_NOISE:g} of the scene size)")
+            return ("one of its contacts alone determines it: without it the others do not, "
+                    f"even at {PIN_ID_NOISE:g} of the scene size")
         return ""
     for fit, members in groups:
         # a wrong contact (a body contact taken as a tip) a barely determined primitive bends
