@@ -402,18 +402,15 @@ def _fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str,
     # contacts no primitive explains (fit-data indices), which an undetermined one may take
     free = np.setdiff1d(np.arange(data.n_contacts),
                         np.concatenate([m for _, m in groups] or [np.zeros(0, dtype=int)]))
-    # (off by more than the noise and than the kinematic errors a reported primitive must hold
-    # at: a few micrometres off a line of four tips is no bending contact)
     # the length kinematic errors scale with: the arm's reach (the scene size without a robot)
     id_scale, id_of = (reach, "the robot's reach") if reach else (None, "the scene size")
+    # (off by more than the noise and than the kinematic errors a reported primitive must hold
+    # at: a few micrometres off a line of four tips is no bending contact)
     bend_tol = max(BENDING_SIGMAS * seg.noise, REPORT_ID_NOISE * (id_scale or seg.extent))
 
     def weakly_determined(fit: Any, members: NDArray) -> str:
         """Why ``fit`` may not be reported as determined by ``members`` ('' when it may)."""
-        def determined(g: Any) -> bool:
-            return seg.determined(g, REPORT_ID_NOISE, id_scale)
-
-        if not determined(fit):
+        if not seg.determined(fit, REPORT_ID_NOISE, id_scale):
             return (f"its contacts do not determine every parameter at {REPORT_ID_NOISE:g} "
                     f"of {id_of}")
         # every class and link is inferred: a primitive that one contact alone determines

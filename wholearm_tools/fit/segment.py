@@ -451,10 +451,7 @@ def drop_bending(fit: FitResult, members: np.ndarray, data: FitData, tol: float,
     keep_at_least = MODELS[fit.kind].dof + 2 if min_keep is None else min_keep
     while len(members) > keep_at_least:
         worst, worst_r, worst_fit = -1, tol, None
-        for i in range(len(members)):
-            keep = np.delete(members, i)
-            g = fit_primitive(fit.kind, data.take(keep), free_side=fit.free_side,
-                              initial=dict(fit.params))
+        for i, g in _without_each(fit, members, data):
             if not g or rms_dof(g) > 0.5 * rms_dof(fit):
                 continue  # (the others do not agree any better without it)
             r = abs(float(residuals(fit.kind, g.params, data.take(members[i:i + 1]),
@@ -475,13 +472,20 @@ def pinning_contact(fit: FitResult, members: np.ndarray, data: FitData,
     Every contact's class (tip or link body) and link are inferred, never measured, so a fit
     that only one contact determines rests on one inference: if that contact is wrong, its
     residuals cannot show it (the others leave that direction free) and the fit is confidently
-    wrong.  The refits start from ``fit``."""
-    for i in range(len(members)):
-        g = fit_primitive(fit.kind, data.take(np.delete(members, i)), free_side=fit.free_side,
-                          initial=dict(fit.params))
+    wrong."""
+    for i, g in _without_each(fit, members, data):
         if not g or not determined(g):
             return i
     return None
+
+
+def _without_each(fit: FitResult, members: np.ndarray, data: FitData
+                  ) -> Iterator[tuple[int, FitResult]]:
+    """``(i, refit)`` of ``fit`` on ``members`` without ``members[i]``, for each ``i`` (warm
+    start from ``fit``, computed as they are asked for)."""
+    for i in range(len(members)):
+        yield i, fit_primitive(fit.kind, data.take(np.delete(members, i)),
+                               free_side=fit.free_side, initial=dict(fit.params))
 
 
 def segment(
