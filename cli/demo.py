@@ -38,7 +38,8 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
     """Run the whole pipeline on a simulated run and write every deliverable."""
     from wholearm_tools.logs import read_run, write_run
     from wholearm_tools.mesh import export_mesh, map_mesh, write_overlay
-    from wholearm_tools.pipeline import reconstruct, write_reconstruction
+    from wholearm_tools.outputs import write_reconstruction
+    from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report import write_report
     from wholearm_tools.sim import load_scenario
 

@@ -61,7 +61,8 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, robot_f
             as_json: bool, overwrite: bool) -> None:
     """Reconstruct the environment of RUN: detect, classify with B, fit primitives."""
     from wholearm_tools.logs import read_run
-    from wholearm_tools.pipeline import reconstruct, write_reconstruction
+    from wholearm_tools.outputs import write_reconstruction
+    from wholearm_tools.pipeline import reconstruct
 
     prepare_output_dir(out_dir, ["map.json", "contacts.csv"], overwrite)
     data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,

@@ -10,18 +10,17 @@ import dataclasses
 import time
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wholearm_tools.classify.refine import MapSurface, refine_with_map
-from wholearm_tools.contact_table import ContactTable, write_contact_table
+from wholearm_tools.contact_table import ContactTable
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.crossing import MIN_CUTS
 from wholearm_tools.logs.records import Run
-from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap, write_map
+from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap
 from wholearm_tools.robot.model import RobotModel
 
 #: primitive types tried by fit-and-grow, by workspace dimension
@@ -923,12 +922,3 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
                           classification=classification, table=table, fits=fits,
                           surface_map=surface_map, timings=timings, messages=messages)
 
-
-def write_reconstruction(out_dir: str | Path, rec: Reconstruction) -> dict[str, Path]:
-    """Write ``map.json`` and ``contacts.csv`` into ``out_dir`` (created if needed)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {"map": out / "map.json", "contacts": out / "contacts.csv"}
-    write_map(paths["map"], rec.surface_map)
-    write_contact_table(paths["contacts"], rec.table)
-    return paths

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 from cli.report import command
 from wholearm_tools.logs import write_run
-from wholearm_tools.pipeline import write_reconstruction
+from wholearm_tools.outputs import write_reconstruction
 
 
 def _invoke(*args):
