@@ -95,7 +95,7 @@ def test_urdf_round_trip(tmp_path) -> None:
 def test_urdf_errors_name_the_problem(tmp_path) -> None:
     with pytest.raises(RobotModelError, match="malformed URDF"):
         robot_from_urdf("<robot><link name='a'>", source="bad.urdf")
-    with pytest.raises(RobotModelError, match="no collision cylinder"):
+    with pytest.raises(RobotModelError, match="no collision or visual geometry"):
         robot_from_urdf("""<robot name="r"><link name="base"/><link name="l1"/>
             <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
             <axis xyz="0 0 1"/></joint></robot>""", source="meshes.urdf")

@@ -23,6 +23,10 @@ from wholearm_tools.errors import InputError, RobotModelError
 
 FloatArray = NDArray[np.float64]
 
+MIN_TIP_DISTANCE = 1e-6
+"""Shortest distance [m] from the last joint to the tip: a last link shorter than this has no
+tip to touch with and no axis, and every later stage would divide by its length."""
+
 
 def _readonly(arr: ArrayLike) -> FloatArray:
     out = np.array(arr, dtype=float)
@@ -109,6 +113,10 @@ class RobotModel:
             object.__setattr__(self, attr, _readonly(value))
         if np.any(self.link_radii < 0) or self.tip_radius < 0:
             raise RobotModelError(f"robot {self.name!r}: negative link or tip radius")
+        if float(np.linalg.norm(self.tip_offset)) < MIN_TIP_DISTANCE:
+            raise RobotModelError(f"robot {self.name!r}: the last link has zero length (the tip "
+                                  f"is at joint {self.joint_names[-1]!r}); the tip must lie "
+                                  "beyond the last joint")
         if np.any(self.lower >= self.upper):
             raise RobotModelError(f"robot {self.name!r}: a joint has lower limit >= upper limit")
         object.__setattr__(self, "tip_radius", float(self.tip_radius))
