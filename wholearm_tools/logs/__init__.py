@@ -4,10 +4,10 @@
 the records (``JointLog``, ``GroundTruth``, ``Run``) are shared by every stage.
 """
 
-from wholearm_tools.logs.records import CONTACT_KINDS, GroundTruth, JointLog, Run
+from wholearm_tools.logs.records import CONTACT_KINDS, TORQUE_SOURCES, GroundTruth, JointLog, Run
 
-__all__ = ["CONTACT_KINDS", "GroundTruth", "JointLog", "LogWarning", "Run", "inspect_log",
-           "read_joint_log", "read_run", "write_run"]
+__all__ = ["CONTACT_KINDS", "TORQUE_SOURCES", "GroundTruth", "JointLog", "LogWarning", "Run",
+           "inspect_log", "read_joint_log", "read_run", "write_run"]
 
 
 def __getattr__(name: str):  # lazy: keep `import wholearm_tools.logs` free of mcap

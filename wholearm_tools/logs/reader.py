@@ -14,23 +14,33 @@ Rules (see ``docs/log-format.md``):
 * Commands are held onto the state stamps (zero-order hold: the latest command at or before each
   state).  Before the first command the torque is 0 and the commanded position is the measured
   one.
+* The torque evidence (``JointLog.tau_cmd``) comes from the source ``effort`` names (recorded
+  in ``JointLog.torque_source``): ``"commanded"`` torque on the command topic (default),
+  ``"measured"`` effort on the state topic, or ``"position"``: the controller's stiffness times
+  (commanded - measured) position.  A command topic that is the state topic carries measured
+  values, never commands: it is refused unless the effort is read as measured.
+* Bags (rosbag2 folders, ``.db3``, ROS 1 ``.bag``) are read through
+  :mod:`wholearm_tools.logs.bags`; everything after the scan is the same.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wholearm_tools.errors import LogFormatError
+from wholearm_tools.errors import InputError, LogFormatError
+from wholearm_tools.logs.bags import scan_log
 from wholearm_tools.logs.decoders import ArrayColumns, JointStateColumns, ValueList
-from wholearm_tools.logs.records import GroundTruth, JointLog, Run
-from wholearm_tools.logs.scan import LogScan, scan_mcap
+from wholearm_tools.logs.records import TORQUE_SOURCES, GroundTruth, JointLog, Run
+from wholearm_tools.logs.scan import LogScan
 from wholearm_tools.logs.schemas import (
     COMMAND_TOPIC,
     DESCRIPTION_TOPIC,
@@ -38,6 +48,7 @@ from wholearm_tools.logs.schemas import (
     GROUND_TRUTH,
     JOINT_STATE,
     JOINT_TOPIC,
+    METADATA_NAME,
     STRING,
     TRUTH_TOPIC,
 )
@@ -71,7 +82,7 @@ def _scan(path: Path, joint_topic: str | None, command_topic: str | None) -> Log
             return topic == DESCRIPTION_TOPIC
         return schema == GROUND_TRUTH
 
-    scan = scan_mcap(path, wanted)
+    scan = scan_log(path, wanted)
     if scan.truncated:
         _warn(f"{path}: file is truncated ({scan.truncation}); read the {scan.n_messages} "
               "messages before the cut")
@@ -199,8 +210,95 @@ def _commands(scan: LogScan, topic: str, explicit: bool, names: tuple[str, ...],
     return tau, q_cmd
 
 
+def _stiffness(scan: LogScan, stiffness: float | Sequence[float] | None,
+               names: tuple[str, ...]) -> tuple[NDArray[np.float64] | None, str]:
+    """Controller stiffness per joint [N m/rad] from the argument or the log's ``wholearm``
+    metadata record (key ``stiffness``: a JSON number or list), and where it came from."""
+    origin = "given"
+    if stiffness is None:
+        text = scan.metadata.get(METADATA_NAME, {}).get("stiffness")
+        if text is None:
+            return None, ""
+        try:
+            stiffness = json.loads(text)
+        except ValueError:
+            raise LogFormatError(f"{scan.source}: metadata {METADATA_NAME!r} stiffness is not a "
+                                 f"JSON number or list: {text!r}") from None
+        origin = "from the log's metadata"
+    try:
+        k = np.asarray(stiffness, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"stiffness must be numbers, got {stiffness!r}") from None
+    if k.ndim == 0:
+        k = np.full(len(names), float(k))
+    if k.shape != (len(names),):
+        raise InputError(f"expected one stiffness or {len(names)} (one per joint "
+                         f"{list(names)}), got {k.size}")
+    if not np.all(np.isfinite(k)) or np.any(k <= 0):
+        raise InputError(f"stiffness must be positive and finite [N m/rad], got {k.tolist()}")
+    return k, origin
+
+
+def _torque_evidence(scan: LogScan, topic: str, state: JointStateColumns,
+                     keep: NDArray[np.intp], cols: list[int], names: tuple[str, ...],
+                     stamps: NDArray[np.int64], q: NDArray[np.float64],
+                     command_topic: str | None, effort: str,
+                     stiffness: float | Sequence[float] | None, require: bool
+                     ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None,
+                                str | None, str]:
+    """``(tau, q_cmd, torque_source, note)``: the torque evidence from the source ``effort``."""
+    source = scan.source
+    if effort not in TORQUE_SOURCES:
+        raise InputError(f"effort must be one of {list(TORQUE_SOURCES)}, got {effort!r}")
+    cmd_topic = command_topic or COMMAND_TOPIC
+    if cmd_topic == topic and effort != "measured":
+        raise LogFormatError(f"{source}: the command topic {cmd_topic!r} is the state topic: its "
+                             "effort[] is the measured effort and its position[] the measured "
+                             "position, not commands; read them with --effort measured "
+                             "(effort='measured') or give the topic that carries the commands")
+    tau, q_cmd = (None, None) if cmd_topic == topic else _commands(
+        scan, cmd_topic, command_topic is not None, names, stamps, q)
+    if effort == "measured":
+        measured = _take(state.effort, keep, cols)
+        missing = [n for n, ok in zip(names, np.all(np.isfinite(measured), axis=0), strict=True)
+                   if not ok]
+        if missing:
+            raise LogFormatError(f"{source}: topic {topic!r} has no measured effort[] for joints "
+                                 f"{missing} (--effort measured reads the state topic's effort)")
+        return measured, q_cmd, "measured", f"measured effort (effort[] on {topic})"
+    if effort == "position":
+        if q_cmd is None:
+            raise LogFormatError(f"{source}: --effort position needs commanded positions "
+                                 f"(position[] on a JointState command topic; {cmd_topic!r} has "
+                                 "none); choose the topic with --command-topic")
+        k, origin = _stiffness(scan, stiffness, names)
+        if k is None:
+            raise InputError(f"{source}: --effort position needs the controller's stiffness: "
+                             "--stiffness K [N m/rad], one value or one per joint")
+        shown = (f"{k[0]:g}" if np.all(k == k[0]) else
+                 "[" + ", ".join(f"{v:g}" for v in k) + "]")
+        return (k * (q_cmd - q), q_cmd, "position",
+                f"stiffness {shown} N m/rad ({origin}) x (commanded - measured position), "
+                f"commands on {cmd_topic}")
+    if tau is None:
+        if require:
+            hint = ""
+            if np.all(np.isfinite(_take(state.effort, keep, cols))):
+                hint = f"; {topic!r} carries measured effort: use --effort measured"
+            elif q_cmd is not None:
+                hint = ("; the commands carry positions: use --effort position --stiffness K")
+            raise LogFormatError(f"{source}: no commanded torques (expected effort[] on "
+                                 f"{cmd_topic!r} as JointState or Float64MultiArray){hint}")
+        return None, q_cmd, None, ""
+    kind = ("Float64MultiArray" if isinstance(scan.decoded.get(cmd_topic), ArrayColumns)
+            else "effort[]")
+    return tau, q_cmd, "commanded", f"commanded torque ({kind} on {cmd_topic})"
+
+
 def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
-               command_topic: str | None, require_commands: bool, warn_extra: bool) -> JointLog:
+               command_topic: str | None, require_commands: bool, warn_extra: bool,
+               effort: str = "commanded", stiffness: float | Sequence[float] | None = None,
+               ignored: tuple[str, ...] = ()) -> JointLog:
     source = scan.source
     cols_data = scan.decoded[topic]
     assert isinstance(cols_data, JointStateColumns)
@@ -224,14 +322,12 @@ def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
         log.info("%s: topic %r has no complete velocities; differentiating positions",
                  source, topic)
         qd = np.gradient(q, t, axis=0) if t.shape[0] > 1 else np.zeros_like(q)
-    cmd_topic = command_topic or COMMAND_TOPIC
-    tau_cmd, q_cmd = (None, None) if cmd_topic == topic else _commands(
-        scan, cmd_topic, command_topic is not None, names, stamps, q)
-    if require_commands and tau_cmd is None:
-        raise LogFormatError(f"{source}: no commanded torques (expected effort[] on "
-                             f"{cmd_topic!r} as JointState or Float64MultiArray)")
+    tau_cmd, q_cmd, torque_source, note = _torque_evidence(
+        scan, topic, cols_data, keep, cols, names, stamps, q, command_topic, effort, stiffness,
+        require_commands)
     return JointLog(joint_names=names, t=_handover(t), q=_handover(q), qd=_handover(qd),
-                    tau_cmd=_handover(tau_cmd), q_cmd=_handover(q_cmd), t0_ns=int(stamps[0]))
+                    tau_cmd=_handover(tau_cmd), q_cmd=_handover(q_cmd), t0_ns=int(stamps[0]),
+                    torque_source=torque_source, torque_note=note, ignored_joints=ignored)
 
 
 def _handover(arr: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
@@ -253,23 +349,29 @@ def read_joint_log(
     command_topic: str | None = None,
     joint_names: tuple[str, ...] | None = None,
     require_commands: bool = False,
+    effort: str = "commanded",
+    stiffness: float | Sequence[float] | None = None,
 ) -> JointLog:
     """Read one arm's joint states (and commands if present) without a robot model.
 
     Parameters
     ----------
-    path : MCAP file
+    path : MCAP file, rosbag2 folder, ``.db3`` or ROS 1 ``.bag``
     joint_topic : JointState topic; default ``/joint_states``, or the only JointState topic
     command_topic : command topic (JointState effort[] or Float64MultiArray); default
         ``/joint_commands`` when present
     joint_names : joints to read, in this order (default: every joint of the topic)
-    require_commands : raise LogFormatError when there are no commanded torques
+    require_commands : raise LogFormatError when there is no torque evidence
+    effort : torque source, one of :data:`~wholearm_tools.logs.records.TORQUE_SOURCES`
+        (``"commanded"``, ``"measured"``, ``"position"``)
+    stiffness : controller stiffness [N m/rad] for ``effort="position"`` (one value, or one per
+        joint; default: the log's ``wholearm`` metadata ``stiffness`` if present)
     """
     path = Path(path)
     scan = _scan(path, joint_topic, command_topic)
     topic = _select_joint_topic(scan, joint_topic, command_topic)
     return _joint_log(scan, topic, joint_names, command_topic, require_commands,
-                      warn_extra=joint_names is not None)
+                      warn_extra=joint_names is not None, effort=effort, stiffness=stiffness)
 
 
 def ground_truth_from_json(body: Any, source: str = "ground truth") -> GroundTruth:
@@ -291,18 +393,28 @@ def ground_truth_from_json(body: Any, source: str = "ground truth") -> GroundTru
         raise LogFormatError(f"{source}: malformed ground truth ({exc!r})") from None
 
 
-def _robot(scan: LogScan, robot: RobotModel | str | os.PathLike[str] | None) -> RobotModel:
-    from wholearm_tools.robot import load_urdf, robot_from_urdf
+def _robot(scan: LogScan, robot: RobotModel | str | os.PathLike[str] | None,
+           log_joints: tuple[str, ...], chain: dict[str, Any]
+           ) -> tuple[RobotModel, dict[str, str]]:
+    """The robot, and the log joints its chain does not drive with the reason for each."""
+    from wholearm_tools.robot import load_urdf_chain, urdf_chain
 
     if isinstance(robot, RobotModel):
-        return robot
+        given = {k: v for k, v in chain.items() if v}
+        if given:
+            raise InputError(f"{sorted(given)} choose a chain in a URDF; robot is already a "
+                             "RobotModel")
+        return robot, {n: "not in the robot" for n in log_joints if n not in robot.joint_names}
     if robot is not None:
-        return load_urdf(robot)
-    description = scan.decoded.get(DESCRIPTION_TOPIC)
-    if not isinstance(description, ValueList) or not description.values:
-        raise LogFormatError(f"{scan.source}: no URDF on {DESCRIPTION_TOPIC} and no robot "
-                             "given (pass robot=RobotModel or a URDF path, or --robot)")
-    return robot_from_urdf(description.values[0], source=f"{scan.source} {DESCRIPTION_TOPIC}")
+        found = load_urdf_chain(robot, joints=log_joints, **chain)
+    else:
+        description = scan.decoded.get(DESCRIPTION_TOPIC)
+        if not isinstance(description, ValueList) or not description.values:
+            raise LogFormatError(f"{scan.source}: no URDF on {DESCRIPTION_TOPIC} and no robot "
+                                 "given (pass robot=RobotModel or a URDF path, or --robot)")
+        found = urdf_chain(description.values[0], f"{scan.source} {DESCRIPTION_TOPIC}",
+                           joints=log_joints, **chain)
+    return found.robot, found.ignored_log_joints(log_joints)
 
 
 def read_run(
@@ -312,22 +424,39 @@ def read_run(
     command_topic: str | None = None,
     robot: RobotModel | str | os.PathLike[str] | None = None,
     require_commands: bool = False,
+    effort: str = "commanded",
+    stiffness: float | Sequence[float] | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    package_paths: Sequence[str | os.PathLike[str]] = (),
 ) -> Run:
     """Read a run: robot (``robot`` argument or the log's URDF), joint log, ground truth.
 
     Parameters
     ----------
-    path : MCAP file (ROS 2 or JSON profile, detected from the channels)
-    joint_topic, command_topic : see :func:`read_joint_log`
+    path : MCAP file (ROS 2 or JSON profile, detected from the channels), rosbag2 folder
+        (MCAP or SQLite storage), ``.db3`` file or ROS 1 ``.bag``
+    joint_topic, command_topic, effort, stiffness : see :func:`read_joint_log`
     robot : RobotModel or URDF file; default: the URDF on ``/robot_description``
-    require_commands : raise LogFormatError when there are no commanded torques
+    require_commands : raise LogFormatError when there is no torque evidence
+    base_link, tip_link : ends of the chain in the URDF (default: the root, and the only
+        branch the log's joints drive); log joints off the chain are ignored with a
+        :class:`LogWarning` naming each, and listed in ``JointLog.ignored_joints``
+    package_paths : folders that resolve the URDF's ``package://`` meshes
     """
     path = Path(path)
     scan = _scan(path, joint_topic, command_topic)
     topic = _select_joint_topic(scan, joint_topic, command_topic)
-    model = _robot(scan, robot)
+    state = scan.decoded[topic]
+    log_joints = tuple(state.names) if isinstance(state, JointStateColumns) else ()
+    model, ignored = _robot(scan, robot, log_joints, {
+        "base_link": base_link, "tip_link": tip_link, "package_paths": tuple(package_paths)})
+    if ignored:
+        _warn(f"{path}: topic {topic!r}: ignoring joints not in the robot: {list(ignored)} ("
+              + "; ".join(f"{name}: {why}" for name, why in ignored.items()) + ")")
     joint_log = _joint_log(scan, topic, model.joint_names, command_topic, require_commands,
-                           warn_extra=True)
+                           warn_extra=False, effort=effort, stiffness=stiffness,
+                           ignored=tuple(ignored))
     truth = None
     values = scan.decoded.get(TRUTH_TOPIC)
     if isinstance(values, ValueList) and values.values:

@@ -17,6 +17,11 @@ from wholearm_tools.robot.model import RobotModel
 
 FloatArray = NDArray[np.float64]
 
+TORQUE_SOURCES = ("commanded", "measured", "position")
+"""Where ``JointLog.tau_cmd`` comes from: the commanded torque (``/joint_commands`` effort[] or
+Float64MultiArray), the measured effort on the state topic, or the controller's stiffness times
+(commanded - measured) position."""
+
 CONTACT_KINDS = ("tip", "joint", "body")
 """Ground-truth contact location on a link: the tip sphere (last link), the outer joint sphere
 (inner links), or the link body (cylinder side)."""
@@ -44,9 +49,15 @@ class JointLog:
     t : (N,) float, seconds since ``t0_ns``, strictly increasing
     q : (N, n) float, measured joint positions [rad]
     qd : (N, n) float, joint velocities [rad/s] (logged, or differentiated from ``q``)
-    tau_cmd : (N, n) float or None, commanded torques [N m] held onto the state timestamps
+    tau_cmd : (N, n) float or None, the torque evidence [N m] on the state timestamps: what
+        the joints were driven with, from the source ``torque_source`` names
     q_cmd : (N, n) float or None, commanded positions when the log has them
     t0_ns : int, absolute time of ``t[0]`` in nanoseconds
+    torque_source : one of :data:`TORQUE_SOURCES`, or None without ``tau_cmd``
+        (default: ``"commanded"`` when ``tau_cmd`` is given)
+    torque_note : one line saying where ``tau_cmd`` was read (topic, stiffness), for reports
+    ignored_joints : joints of the log that were not read because the robot's chain does not
+        drive them (each named in a warning when the log was read)
     """
 
     joint_names: tuple[str, ...]
@@ -56,6 +67,9 @@ class JointLog:
     tau_cmd: FloatArray | None = None
     q_cmd: FloatArray | None = None
     t0_ns: int = 0
+    torque_source: str | None = None
+    torque_note: str = ""
+    ignored_joints: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -72,6 +86,16 @@ class JointLog:
                 raise InputError(f"expected {name} of shape ({t.shape[0]}, {n}), got {arr.shape}")
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "t0_ns", int(self.t0_ns))
+        source = self.torque_source
+        if source is None and self.tau_cmd is not None:
+            source = "commanded"
+        if (source is None) != (self.tau_cmd is None) or (
+                source is not None and source not in TORQUE_SOURCES):
+            raise InputError(f"torque_source {self.torque_source!r} does not fit tau_cmd "
+                             f"({'absent' if self.tau_cmd is None else 'given'}); expected one "
+                             f"of {TORQUE_SOURCES} with tau_cmd, None without")
+        object.__setattr__(self, "torque_source", source)
+        object.__setattr__(self, "ignored_joints", tuple(self.ignored_joints))
 
     @property
     def n_samples(self) -> int:
