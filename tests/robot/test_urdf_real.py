@@ -187,3 +187,14 @@ def test_unknown_links_and_unsupported_chain_joints_are_named(mesh_urdf: Path) -
         load_urdf_chain(mesh_urdf, tip_link="gripper")
     with pytest.raises(RobotModelError, match="link 'upper' is not below the base link 'fore'"):
         load_urdf_chain(mesh_urdf, base_link="fore", tip_link="upper")
+
+
+def test_joints_at_one_point_are_refused() -> None:
+    wrist = """<joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/>
+        <axis xyz="1 0 0"/><limit lower="-1" upper="1"/></joint>
+      <link name="l3"><collision><geometry><sphere radius="0.02"/></geometry></collision></link>
+      <joint name="tip" type="fixed"><parent link="l3"/><child link="t"/>
+        <origin xyz="0.2 0 0"/></joint><link name="t"/>"""
+    with pytest.raises(RobotModelError, match=r"wrist.urdf: joints 'j2' and 'j3' sit at one "
+                                              r"point \(link 'l2' has zero length\)"):
+        robot_from_urdf(_capsule_arm(wrist), source="wrist.urdf")

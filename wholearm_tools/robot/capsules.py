@@ -42,8 +42,8 @@ class CapsuleFit:
     """How one link's capsule was obtained.
 
     ``method``: ``"capsule"`` (the URDF already describes the link with a cylinder and/or
-    spheres: its radius is used as is), ``"mesh"`` (fitted to meshes/boxes as described in the
-    module docstring) or ``"none"`` (a zero-length link without geometry: a point).
+    spheres: its radius is used as is) or ``"mesh"`` (fitted to meshes/boxes as described in
+    the module docstring).
     ``sources``: the URDF links whose geometry was used; ``radius`` and ``length`` [m];
     ``hull_volume`` and ``capsule_volume`` [m³] (0 when not a mesh fit); ``widest``: where the
     radius was set, as a fraction along the axis (may lie outside 0..1 when geometry reaches
@@ -71,8 +71,6 @@ class CapsuleFit:
         what = ", ".join(self.sources)
         if self.method == "capsule":
             return f"capsule radius from the URDF's cylinder/sphere on {what}"
-        if self.method == "none":
-            return f"zero-length link without collision geometry ({what}): a point"
         return (f"capsule fitted to the collision geometry of {what} ({self.vertices} hull "
                 f"vertices): covers all of it; widest at {self.widest:.2f} of the axis; capsule "
                 f"volume {self.over_cover:.1f}x the geometry's convex hull")

@@ -233,6 +233,12 @@ def urdf_chain(text: str, source: str = "URDF", *, base_link: str | None = None,
     tip_note = f"origin of {chain.tip!r}"
 
     n = len(names)
+    for i in range(n - 1):
+        if np.linalg.norm(origins[i + 1][:3, 3]) < TIP_TOLERANCE:
+            raise RobotModelError(
+                f"{source}: joints {names[i]!r} and {names[i + 1]!r} sit at one point (link "
+                f"{chain.groups[i].links[0]!r} has zero length); wholearm's capsule chain needs "
+                "a length between consecutive joints (intersecting wrist axes are not supported)")
     radii: list[float] = []
     fits: list[CapsuleFit] = []
     for i, group in enumerate(chain.groups):
@@ -252,9 +258,6 @@ def urdf_chain(text: str, source: str = "URDF", *, base_link: str | None = None,
                             f"(no tip frame after it in the URDF)")
             if points.shape[0]:
                 fit = fit_capsule(points, end, link=i, joint=group.joint, sources=used)
-            elif np.linalg.norm(end) < TIP_TOLERANCE and not last:
-                fit = CapsuleFit(link=i, joint=group.joint, method="none",
-                                 sources=(child.name,), radius=0.0, length=0.0)
             else:
                 raise RobotModelError(
                     f"{source}: link {child.name!r} (moved by joint {group.joint!r}) has no "
