@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from cli.options import (
+    RigOptions,
     causal_option,
     command_topic_option,
     joint_topic_option,
@@ -16,7 +17,7 @@ from cli.options import (
     loss_option,
     overwrite_option,
     prepare_output_dir,
-    robot_option,
+    rig_options,
 )
 
 
@@ -33,14 +34,14 @@ from cli.options import (
               help="Local worker processes (default: one per core, at most one per run).")
 @causal_option
 @loss_option
-@robot_option
+@rig_options
 @joint_topic_option
 @command_topic_option
 @json_option
 @overwrite_option
 def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
             scheduler: str | None, workers: int | None, causal: bool, loss: str,
-            robot_file: Path | None, joint_topic: str | None, command_topic: str | None,
+            rig: RigOptions, joint_topic: str | None, command_topic: str | None,
             as_json: bool, overwrite: bool) -> None:
     """Reconstruct every LOG with every --B value and compare the results.
 
@@ -57,7 +58,7 @@ def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
             raise click.ClickException(f"{log}: not a log file")
     prepare_output_dir(out_dir, list(OUTPUT_NAMES), overwrite)
     read_options = {"joint_topic": joint_topic, "command_topic": command_topic,
-                    "robot": str(robot_file) if robot_file else None, "require_commands": True}
+                    "require_commands": True, **rig.read_kwargs()}
     try:
         table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
                              read_options=read_options, causal=causal, loss=loss)

@@ -27,13 +27,14 @@ import click
 
 from cli.options import (
     B_option,
+    RigOptions,
     causal_option,
     check_output_file,
     command_topic_option,
     joint_topic_option,
     json_option,
     overwrite_option,
-    robot_option,
+    rig_options,
 )
 
 log = logging.getLogger(__name__)
@@ -79,18 +80,18 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
 
 
 @click.command("contacts")
-@click.argument("run", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.argument("run", type=click.Path(exists=True, path_type=Path))
 @B_option(default=None)
 @causal_option
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the contacts as CSV, or Parquet for a .parquet name (default: a "
                    "table on stdout).")
-@robot_option
+@rig_options
 @joint_topic_option
 @command_topic_option
 @json_option
 @overwrite_option
-def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: Path | None,
+def command(run: Path, B: float, causal: bool, output: Path | None, rig: RigOptions,
             joint_topic: str | None, command_topic: str | None, as_json: bool,
             overwrite: bool) -> None:
     """Detect the contacts of RUN, identify the link, and classify tip vs link body."""
@@ -99,8 +100,8 @@ def command(run: Path, B: float, causal: bool, output: Path | None, robot_file: 
 
     if output is not None:
         check_output_file(output, overwrite)
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,
-                    require_commands=True)
+    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                    require_commands=True, **rig.read_kwargs())
     fields, rows = contact_rows(data, B, causal)
     log.info("%d contacts in %s", len(rows), run)
     if output is not None:

@@ -1,4 +1,5 @@
-"""``wholearm inspect RUN.mcap``: what a log contains (topics, joints, rates, run readiness)."""
+"""``wholearm inspect RUN``: what a log contains (topics, joints, rates, torque sources, run
+readiness).  RUN is an MCAP file, a rosbag2 folder, a ``.db3`` or a ROS 1 ``.bag``."""
 
 from __future__ import annotations
 
@@ -16,15 +17,16 @@ def _yes(value: object) -> str:
 
 
 @click.command("inspect")
-@click.argument("run", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("run", type=click.Path(path_type=Path))
 @json_option
 @click.option("--joint-topic", default=None, metavar="TOPIC",
               help="JointState topic to describe (default /joint_states or the only one).")
 def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
-    """Describe the MCAP log RUN: topics, joints, duration, rates, URDF, commands, truth."""
+    """Describe the log RUN: topics, joints, duration, rates, URDF, torque sources, truth."""
     from wholearm_tools.logs.inspect import inspect_log
 
     info = inspect_log(run, joint_topic=joint_topic)
+    info["torque_sources"] = _torque_sources(info)
     info["contacts_found"] = _contacts_found(run, info, joint_topic)
     if as_json:
         click.echo(json.dumps(info, indent=2, sort_keys=True))
@@ -57,6 +59,7 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     out.append("commands:  " + (f"{cmd['topic']} ({cmd['schema']}; torques "
                                 f"{_yes(cmd['torques'])}, positions {_yes(cmd['positions'])})"
                                 if cmd else "no"))
+    out.append("torque:    " + _torque_line(info["torque_sources"]))
     gt = info["ground_truth"]
     out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body),"
                                 f" {gt['surfaces']} surfaces" if gt else "no"))
@@ -76,6 +79,27 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     if info["attachments"]:
         out.append(f"attachments: {', '.join(info['attachments'])}")
     click.echo("\n".join(out))
+
+
+def _torque_sources(info: dict) -> dict:
+    """Which torque evidence the log offers (``--effort``): commanded torques, measured effort
+    on the JointState topics, commanded positions on the command topic."""
+    cmd = info.get("commands") or {}
+    return {"commanded": bool(cmd.get("torques")),
+            "measured": [t for t, jt in info["joint_topics"].items()
+                         if jt["effort"] and t != cmd.get("topic")],
+            "position": bool(cmd.get("positions"))}
+
+
+def _torque_line(sources: dict) -> str:
+    measured = sources["measured"]
+    parts = ["commanded " + ("yes (default)" if sources["commanded"] else "no"),
+             "measured " + (f"on {len(measured)} JointState topic{'s' * (len(measured) > 1)} "
+                            "(--effort measured)" if measured else "no"),
+             "position " + ("yes (--effort position --stiffness K)" if sources["position"]
+                            else "only with a command topic carrying positions "
+                                 "(--command-topic T --effort position --stiffness K)")]
+    return "; ".join(parts)
 
 
 def _contacts_found(run: Path, info: dict, joint_topic: str | None) -> dict | None:

@@ -17,6 +17,7 @@ COMMANDS = (
     "cli.scenarios",
     "cli.simulate",
     "cli.inspect",
+    "cli.robot",
     "cli.contacts",
     "cli.plot_ptip",
     "cli.reconstruct",

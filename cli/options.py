@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -68,3 +72,76 @@ causal_option = click.option(
 loss_option = click.option(
     "--loss", type=click.Choice(["linear", "huber", "cauchy"]), default="huber",
     show_default=True, help="Fit loss (robust losses resist misclassified contacts).")
+
+
+# ---------------------------------------------------------------------------- the rig
+@dataclass(frozen=True)
+class RigOptions:
+    """What ``rig_options`` collected: the robot description, how to cut its chain, and where
+    the torque evidence comes from; ``read_kwargs()`` are the matching ``read_run`` keywords."""
+
+    robot: Path | None = None
+    base_link: str | None = None
+    tip_link: str | None = None
+    package_paths: tuple[Path, ...] = ()
+    effort: str = "commanded"
+    stiffness: tuple[float, ...] | None = None
+
+    def read_kwargs(self) -> dict[str, Any]:
+        stiffness = (self.stiffness[0] if self.stiffness and len(self.stiffness) == 1
+                     else self.stiffness)
+        return {"robot": None if self.robot is None else str(self.robot),
+                "base_link": self.base_link, "tip_link": self.tip_link,
+                "package_paths": tuple(str(p) for p in self.package_paths),
+                "effort": self.effort, "stiffness": stiffness}
+
+
+def _stiffness(ctx: click.Context, param: click.Parameter, value: str | None
+               ) -> tuple[float, ...] | None:
+    if value is None:
+        return None
+    try:
+        values = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected a number or comma-separated numbers, got "
+                                 f"{value!r}") from None
+    if not all(v > 0 and v != float("inf") for v in values):
+        raise click.BadParameter(f"expected positive stiffness values, got {value!r}")
+    return values
+
+
+def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``--robot``, ``--base-link``, ``--tip-link``, ``--package-path``, ``--effort`` and
+    ``--stiffness``, handed to the command as one keyword ``rig`` (:class:`RigOptions`)."""
+    from wholearm_tools.logs.records import TORQUE_SOURCES
+
+    @functools.wraps(f)
+    def command(*args: Any, robot_file: Path | None, base_link: str | None,
+                tip_link: str | None, package_paths: tuple[Path, ...], effort: str,
+                stiffness: tuple[float, ...] | None, **kwargs: Any) -> Any:
+        rig = RigOptions(robot_file, base_link, tip_link, tuple(package_paths), effort,
+                         stiffness)
+        return f(*args, rig=rig, **kwargs)
+
+    options = [
+        robot_option,
+        click.option("--base-link", default=None, metavar="LINK",
+                     help="URDF link the chain starts at (default: the URDF's root)."),
+        click.option("--tip-link", default=None, metavar="LINK",
+                     help="URDF link the chain ends at (needed when the URDF branches and "
+                          "the log's joints do not decide, e.g. gripper frame vs jaw)."),
+        click.option("--package-path", "package_paths", multiple=True,
+                     type=click.Path(file_okay=False, exists=True, path_type=Path),
+                     help="Folder resolving package:// meshes of the URDF (repeatable; "
+                          "$ROS_PACKAGE_PATH is searched too)."),
+        click.option("--effort", type=click.Choice(TORQUE_SOURCES), default="commanded",
+                     show_default=True,
+                     help="Torque evidence: commanded torque on the command topic, measured "
+                          "effort on the state topic, or commanded position x --stiffness."),
+        click.option("--stiffness", default=None, metavar="K[,K...]", callback=_stiffness,
+                     help="Controller stiffness [N m/rad] for --effort position (one value, "
+                          "or one per joint; default: the log's metadata)."),
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command

@@ -14,26 +14,27 @@ import click
 
 from cli.options import (
     B_option,
+    RigOptions,
     check_output_file,
     command_topic_option,
     joint_topic_option,
     overwrite_option,
-    robot_option,
+    rig_options,
 )
 
 
 @click.command("plot-ptip")
-@click.argument("run", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.argument("run", type=click.Path(exists=True, path_type=Path))
 @B_option(default=None)
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Image file (PNG, PDF or SVG by extension).")
 @click.option("--steps", type=click.IntRange(2, 2000), default=200, show_default=True,
               help="Number of replay times.")
-@robot_option
+@rig_options
 @joint_topic_option
 @command_topic_option
 @overwrite_option
-def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | None,
+def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
             joint_topic: str | None, command_topic: str | None, overwrite: bool) -> None:
     """Plot every contact's tip probability over time (causal replay, Figure 4)."""
     import numpy as np
@@ -44,8 +45,8 @@ def command(run: Path, B: float, output: Path, steps: int, robot_file: Path | No
     from wholearm_tools.logs import read_run
 
     check_output_file(output, overwrite)
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic, robot=robot_file,
-                    require_commands=True)
+    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                    require_commands=True, **rig.read_kwargs())
     contacts = detect_contacts(data.log, data.robot)
     grid = swept_map(data.robot, data.log.q, B=B)
     times = np.linspace(data.log.t[0], data.log.t[-1], steps)

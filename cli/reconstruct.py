@@ -9,6 +9,7 @@ import click
 
 from cli.options import (
     B_option,
+    RigOptions,
     causal_option,
     command_topic_option,
     fit_workers_option,
@@ -17,7 +18,7 @@ from cli.options import (
     loss_option,
     overwrite_option,
     prepare_output_dir,
-    robot_option,
+    rig_options,
 )
 
 
@@ -44,19 +45,19 @@ def summary_lines(rec) -> list[str]:
 
 
 @click.command("reconstruct")
-@click.argument("run", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.argument("run", type=click.Path(exists=True, path_type=Path))
 @B_option()
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (map.json, contacts.csv).")
 @causal_option
 @loss_option
-@robot_option
+@rig_options
 @joint_topic_option
 @command_topic_option
 @fit_workers_option
 @json_option
 @overwrite_option
-def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, robot_file: Path | None,
+def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: RigOptions,
             joint_topic: str | None, command_topic: str | None, workers: int | None,
             as_json: bool, overwrite: bool) -> None:
     """Reconstruct the environment of RUN: detect, classify with B, fit primitives."""
@@ -66,7 +67,7 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, robot_f
 
     prepare_output_dir(out_dir, ["map.json", "contacts.csv"], overwrite)
     data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                    robot=robot_file, require_commands=True)
+                    require_commands=True, **rig.read_kwargs())
     rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
     if not rec.surface_map.primitives:
         reason = "; ".join(rec.messages) or "no primitive explains the contacts"

@@ -13,11 +13,12 @@ from pathlib import Path
 import click
 
 from cli.options import (
+    RigOptions,
     check_output_file,
     command_topic_option,
     joint_topic_option,
     overwrite_option,
-    robot_option,
+    rig_options,
 )
 
 #: B used for an MCAP log when --B is not given [m]
@@ -59,12 +60,12 @@ def run_from_output_dir(out_dir: Path) -> tuple[Path, float, bool]:
               help=f"Smallest expected surface curvature radius B [m] (default: {DEFAULT_B} for "
                    "a log, the map's B for an output folder).")
 @click.option("--title", default=None, help="Title of page one.")
-@robot_option
+@rig_options
 @joint_topic_option
 @command_topic_option
 @overwrite_option
 def command(run: Path, output: Path, B: float | None, title: str | None,
-            robot_file: Path | None, joint_topic: str | None, command_topic: str | None,
+            rig: RigOptions, joint_topic: str | None, command_topic: str | None,
             overwrite: bool) -> None:
     """Write the PDF report of RUN (an MCAP log or a `wholearm reconstruct` output folder)."""
     from wholearm_tools.logs import read_run
@@ -84,7 +85,7 @@ def command(run: Path, output: Path, B: float | None, title: str | None,
         log_path = run
         B = DEFAULT_B if B is None else B
     data = read_run(log_path, joint_topic=joint_topic, command_topic=command_topic,
-                    robot=robot_file, require_commands=True)
+                    require_commands=True, **rig.read_kwargs())
     rec = reconstruct(data, B=B, causal=causal)
     info = write_report(output, rec, title=title)
     for line in summary_lines(rec, info.accuracy, info.junction):

@@ -14,8 +14,9 @@ from wholearm_tools.logs.records import Run
 from wholearm_tools.robot import robot_to_urdf
 
 
-def _messages(run: Run, ros1: bool):
-    """``(topic, msgtype, timestamp, message)`` of the run: states, commands, the URDF."""
+def _messages(run: Run, ros1: bool, commands: bool = True, measured: float = 0.5):
+    """``(topic, msgtype, timestamp, message)`` of the run: states (with ``measured`` times
+    the commanded torque as their effort), commands, the URDF."""
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
@@ -35,17 +36,18 @@ def _messages(run: Run, ros1: bool):
     for i, ns in enumerate(stamps.tolist()):
         out.append(("/joint_states", "sensor_msgs/msg/JointState", ns, state(
             header=header(i, ns), name=names, position=np.array(log.q[i]),
-            velocity=np.array(log.qd[i]), effort=np.array(log.tau_cmd[i]) * 0.5)))
-        out.append(("/joint_commands", "sensor_msgs/msg/JointState", ns, state(
-            header=header(i, ns), name=names, position=np.array(log.q_cmd[i]),
-            velocity=np.zeros(0), effort=np.array(log.tau_cmd[i]))))
+            velocity=np.array(log.qd[i]), effort=np.array(log.tau_cmd[i]) * measured)))
+        if commands:
+            out.append(("/joint_commands", "sensor_msgs/msg/JointState", ns, state(
+                header=header(i, ns), name=names, position=np.array(log.q_cmd[i]),
+                velocity=np.zeros(0), effort=np.array(log.tau_cmd[i]))))
     return ts, out
 
 
-def write_rosbag2(run: Run, folder: Path, storage: str) -> Path:
+def write_rosbag2(run: Run, folder: Path, storage: str, **options) -> Path:
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    ts, messages = _messages(run, ros1=False)
+    ts, messages = _messages(run, ros1=False, **options)
     plugin = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}[storage]
     with Writer(folder, version=9, storage_plugin=plugin) as writer:
         conns = {}
@@ -128,3 +130,33 @@ def test_bags_under_other_names_are_named(run: Run, tmp_path) -> None:
     broken.write_bytes(b"#ROSBAG V2.0\n" + b"\x00" * 20)
     with pytest.raises(LogFormatError, match=r"broken.bag: cannot read the bag"):
         read_run(broken)
+
+
+def test_contacts_from_measured_effort_in_a_bag_match_the_commanded_run(tmp_path) -> None:
+    """A simulated run rewritten as a rosbag2 folder whose only torque evidence is the effort
+    on /joint_states: `wholearm contacts FOLDER --effort measured` finds the contacts the MCAP
+    with commanded torques gives."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.main import cli
+
+    mcap = tmp_path / "run.mcap"
+    runner = CliRunner()
+    res = runner.invoke(cli, ["simulate", "lab_circle", "-o", str(mcap), "--duration", "12",
+                              "--seed", "1"])
+    assert res.exit_code == 0, res.output
+    folder = write_rosbag2(read_run(mcap), tmp_path / "bag", "sqlite3", commands=False,
+                           measured=1.0)
+    res = runner.invoke(cli, ["contacts", str(folder), "--B", "0.02", "--json"])
+    assert res.exit_code == 1
+    assert "carries measured effort: use --effort measured" in res.output
+    ours = runner.invoke(cli, ["contacts", str(folder), "--B", "0.02", "--json", "--effort",
+                               "measured"])
+    theirs = runner.invoke(cli, ["contacts", str(mcap), "--B", "0.02", "--json"])
+    assert ours.exit_code == 0, ours.output
+    got, want = json.loads(ours.stdout)["contacts"], json.loads(theirs.stdout)["contacts"]
+    assert len(got) == len(want) >= 3
+    assert [(c["t"], c["link"], c["p_tip"]) for c in got] == [
+        (c["t"], c["link"], c["p_tip"]) for c in want]

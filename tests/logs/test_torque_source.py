@@ -118,3 +118,16 @@ def test_joint_log_records_its_torque_source() -> None:
     assert JointLog(("j",), t, q, q).torque_source is None
     with pytest.raises(InputError, match="torque_source 'measured' does not fit tau_cmd"):
         JointLog(("j",), t, q, q, torque_source="measured")
+
+
+def test_positions_outside_the_urdf_limits_are_reported(tmp_path) -> None:
+    from wholearm_tools.robot import RobotModel
+
+    path = write(tmp_path / "rig.mcap")
+    narrow = RobotModel.from_spec({"joints": [
+        {"name": n, "radius": 0.01, "origin": [0.1 * (i > 0), 0, 0], "limits": [-0.05, 0.05]}
+        for i, n in enumerate(NAMES)], "tip": {"offset": [0.1, 0, 0]}})
+    with pytest.warns(UserWarning, match=r"positions outside the robot's joint limits \[rad\]: "
+                                         r"joint_1 0.00..0.15 \(limits -0.05..0.05\); joint_2 "
+                                         r"0.01..0.16 .*may not describe this arm"):
+        read_run(path, joint_topic="/arm/joint_states", robot=narrow, effort="measured")

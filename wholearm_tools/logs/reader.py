@@ -417,6 +417,25 @@ def _robot(scan: LogScan, robot: RobotModel | str | os.PathLike[str] | None,
     return found.robot, found.ignored_log_joints(log_joints)
 
 
+LIMIT_SLACK = 0.05
+"""Logged positions may pass a URDF joint limit by this much [rad] (soft limits, encoder
+noise) before the reader says the URDF may not describe the logged arm."""
+
+
+def _check_limits(path: Path, topic: str, log: JointLog, robot: RobotModel) -> None:
+    """Warn, per joint, when the logged positions leave the robot's joint limits: the URDF
+    then describes another arm, or another calibration (zero offsets) of it, and every pose
+    computed from it is wrong."""
+    low, high = log.q.min(axis=0), log.q.max(axis=0)
+    outside = [f"{name} {lo:.2f}..{hi:.2f} (limits {a:.2f}..{b:.2f})"
+               for name, lo, hi, a, b in zip(robot.joint_names, low, high, robot.lower,
+                                             robot.upper, strict=True)
+               if lo < a - LIMIT_SLACK or hi > b + LIMIT_SLACK]
+    if outside:
+        _warn(f"{path}: topic {topic!r}: positions outside the robot's joint limits [rad]: "
+              f"{'; '.join(outside)}; the URDF may not describe this arm or its calibration")
+
+
 def read_run(
     path: str | os.PathLike[str],
     *,
@@ -457,6 +476,7 @@ def read_run(
     joint_log = _joint_log(scan, topic, model.joint_names, command_topic, require_commands,
                            warn_extra=False, effort=effort, stiffness=stiffness,
                            ignored=tuple(ignored))
+    _check_limits(path, topic, joint_log, model)
     truth = None
     values = scan.decoded.get(TRUTH_TOPIC)
     if isinstance(values, ValueList) and values.values:
