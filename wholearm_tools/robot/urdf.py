@@ -57,7 +57,7 @@ def _fmt(values: np.ndarray) -> str:
 def _xacro_hint(text: str, source: str) -> None:
     markers = [m for m in ("xmlns:xacro", "<xacro:", "${", "$(find") if m in text]
     if source.endswith(".xacro") or markers:
-        found = f" ({', '.join(markers)} found)" if markers else ""
+        found = f" (it has {', '.join(repr(m) for m in markers)})" if markers else ""
         raise RobotModelError(f"{source}: a xacro file{found}, not a URDF; expand it first: "
                               "`xacro robot.urdf.xacro > robot.urdf`")
 
