@@ -31,9 +31,11 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     if as_json:
         click.echo(json.dumps(info, indent=2, sort_keys=True))
         return
+    container = (f"{info['mcap_profile']}, read with {info['library']}"
+                 if info["mcap_profile"].startswith(("rosbag2", "ros1 bag")) else
+                 f"MCAP profile {info['mcap_profile']!r}, written by {info['library'] or '?'}")
     out = [f"file:      {info['file']}",
-           f"profile:   {info['profile'] or '?'} (MCAP profile {info['mcap_profile']!r}, "
-           f"written by {info['library'] or '?'})",
+           f"profile:   {info['profile'] or '?'} ({container})",
            f"duration:  {info['duration_s']:.3f} s, {info['messages']} messages"
            + ("  [TRUNCATED: read up to the cut]" if info["truncated"] else ""),
            "topics:"]
