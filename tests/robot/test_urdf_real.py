@@ -68,8 +68,9 @@ def test_branch_without_tip_link_is_ambiguous(mesh_urdf: Path) -> None:
 def test_log_joints_pick_the_branch_they_drive(mesh_urdf: Path) -> None:
     chain = load_arm(mesh_urdf, joints=[*ARM, "gripper_finger"])
     assert chain.chain.tip == "tool"
-    assert chain.ignored_log_joints([*ARM, "finger", "gripper_finger"]) == {
-        "finger": "URDF joint off the chain", "gripper_finger": "not in the URDF"}
+    assert chain.ignored_log_joints([*ARM, "finger", "gripper_finger", "tool_joint"]) == {
+        "finger": "URDF joint off the chain", "gripper_finger": "not in the URDF",
+        "tool_joint": "fixed joint in the URDF"}
 
 
 def test_chain_to_a_link_without_tip_frame_ends_at_its_farthest_point(mesh_urdf: Path) -> None:

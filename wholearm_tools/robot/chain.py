@@ -57,9 +57,10 @@ class Chain:
 
     ``joints`` are the URDF joints on the path base → tip in order (fixed ones included);
     ``moving`` the names of its revolute/continuous joints (the model's joints); ``groups`` one
-    :class:`RigidGroup` per moving joint; ``off_chain`` maps every movable URDF joint not on
-    the chain to where it is (``"upstream"``: between the tree's root and the base, so it moves
-    the base; ``"branch"``: on a branch the chain does not follow); ``not_modelled`` the links
+    :class:`RigidGroup` per moving joint; ``off_chain`` maps every URDF joint the model does
+    not drive to why: ``"fixed"`` (a fixed joint, on the chain or not), ``"upstream"`` (a movable
+    joint between the tree's root and the base, so it moves the base), ``"branch"`` (a movable
+    joint on a branch the chain does not follow); ``not_modelled`` the links
     behind off-chain movable joints that hang off the chain (their geometry is not part of any
     capsule, because the model has no joint to move them).
     """
@@ -173,9 +174,10 @@ def select_chain(robot: Any, source: str, *, base_link: str | None = None,
     upstream = {j.name for j in tree.path(tree.root, base)}
     off_chain = {}
     for joint in robot.joints:
-        if joint.name in on_chain or joint.type == "fixed":
-            continue
-        off_chain[joint.name] = "upstream" if joint.name in upstream else "branch"
+        if joint.type == "fixed":
+            off_chain[joint.name] = "fixed"
+        elif joint.name not in on_chain:
+            off_chain[joint.name] = "upstream" if joint.name in upstream else "branch"
     groups, not_modelled = _rigid_groups(tree, path)
     return Chain(base=base, tip=tip, joints=tuple(path), moving=moving, groups=groups,
                  off_chain=off_chain, not_modelled=not_modelled)

@@ -141,12 +141,8 @@ class UrdfChain:
                     f"{self.source}: log joint {name!r} moves the chain's base "
                     f"{self.chain.base!r} (it lies above it in the URDF); choose a --base-link "
                     "above that joint")
-            if where == "branch":
-                out[name] = "URDF joint off the chain"
-            elif any(j.name == name for j in self.chain.joints):
-                out[name] = "fixed joint in the URDF"
-            else:
-                out[name] = "not in the URDF"
+            out[name] = {"branch": "URDF joint off the chain",
+                         "fixed": "fixed joint in the URDF"}.get(where or "", "not in the URDF")
         return out
 
     def describe(self) -> list[str]:
