@@ -251,9 +251,12 @@ def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarra
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least clearance along each link: value, t and whether t is a smooth interior minimum
     (closed form where the type has one, else sampling + golden section)."""
+    if len(a) == 0:
+        return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+
     def fn(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
-    exact = _closed_form_min(m, th, side, a, b) if len(a) else None
+    exact = _closed_form_min(m, th, side, a, b)
     val, t = exact if exact is not None else segment_min_numeric(fn, a, b)
     if m.linear or len(a) == 0:
         return val, t, np.zeros(len(a), dtype=bool)
@@ -394,6 +397,29 @@ def _solve_robust(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delt
                   _cost_norm(m, cur.th, side, nd, loss, delta))
 
 
+def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, delta: float,
+                max_iter: int) -> _Solve:
+    """Levenberg-Marquardt (:mod:`wholearm_tools.fit.solve`), with IPOPT where LM cannot
+    finish: a solution on a bound or inequality constraint (IPOPT handles the active set), or
+    no convergence within ``max_iter`` (then IPOPT gets the same budget from where LM
+    stopped, and reports the status a caller checks)."""
+    from wholearm_tools.fit import solve as lm
+
+    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_min, rho_np, _irls_weight)
+    if res.converged and np.all(np.isfinite(res.th)) and not lm.on_bound(m, res.th):
+        _, t, interior = _link_min(m, res.th, side, nd.a, nd.b)
+        return _Solve(res.th, t, interior, "Solve_Succeeded", True, res.iterations, res.cost)
+    start = res.th if np.all(np.isfinite(res.th)) else th0
+    if loss == "linear":
+        sol = _solve(m, nd, start, side, "linear", 1.0, max_iter)
+    else:
+        sol = _solve(m, nd, start, side, "linear", 1.0, max_iter)
+        if sol.success:
+            sol = _solve_robust(m, nd, sol, side, loss, delta, max_iter)
+    sol.iterations += res.iterations
+    return sol
+
+
 # --------------------------------------------------------------------------- covariance
 
 
@@ -401,31 +427,19 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
                      ) -> tuple[np.ndarray, float]:
     """Covariance of the raw parameters (normalised units; NaN when not determined) and the
     sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale)."""
+    from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
+
     nt, nl = len(nd.tip), len(nd.a)
-    bt, bl = _bucket(nt), _bucket(nl)
-    zjac, geq, n_eq, _ = _jacobians(m.kind, bt, bl)
     n = nt + nl
-    tfix = _pad(sol.t, bl) if nl else np.zeros(0)
-    p = np.concatenate([
-        _pad(nd.tip, bt).ravel(order="F"), _pad(nd.tip_w, bt),
-        np.concatenate([np.sqrt(nd.tip_wt), np.zeros(bt - nt)]),
-        _pad(nd.a, bl).ravel(order="F"), _pad(nd.b, bl).ravel(order="F"), _pad(nd.link_w, bl),
-        np.concatenate([np.sqrt(nd.link_wt), np.zeros(bl - nl)]),
-        np.zeros(bl), tfix, [side], [delta],
-    ])
-    z, J = zjac(np.concatenate([sol.th, tfix]), p)
-    z = np.asarray(z).ravel()
-    J = np.asarray(J)
-    keep = np.concatenate([np.arange(nt), bt + np.arange(nl)])
-    z, J = z[keep], J[keep]
+    pts = np.vstack([nd.tip, nd.a + sol.t[:, None] * (nd.b - nd.a)]) if nl else nd.tip
+    sd, J = sd_and_jacobian(m.kind, sol.th, pts)
+    sw = np.sqrt(np.concatenate([nd.tip_wt, nd.link_wt]))
+    z = sw * (side * sd - np.concatenate([nd.tip_w, nd.link_w]))
+    J = (side * sw)[:, None] * J
     # Gauss-Newton on the minimal parameterisation.  The latent t drop out of the Jacobian: at a
     # stationary t the clearance does not change to first order with t (envelope theorem); at a
     # fixed end point t does not move.
-    if n_eq:
-        G = np.asarray(geq(sol.th))
-        Bn = scipy.linalg.null_space(G)
-    else:
-        Bn = np.eye(m.n_raw)
+    Bn = tangent_basis(m.kind, sol.th)
     Jm = J @ Bn
     # identifiability: the weakest parameter combination under unit residual noise (no robust
     # down-weighting: a contact the loss discounts still constrains the geometry it touches)
@@ -446,6 +460,12 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
     except np.linalg.LinAlgError:
         return nan, sens
     return s2 * Bn @ Hi @ Bn.T, sens
+
+
+@functools.lru_cache(maxsize=4096)
+def _t975(dof: int) -> float:
+    """Two-sided 95 % quantile of Student's t with ``dof`` degrees of freedom."""
+    return float(scipy.stats.t.ppf(0.975, dof))
 
 
 def _param_map_jacobian(m: Model, th: np.ndarray) -> np.ndarray:
@@ -800,20 +820,21 @@ def fit_primitive(
                     rt, rl, _, _ = _residuals_norm(m, sol.th, side, nd)
                     z = np.concatenate([np.sqrt(nd.tip_wt) * rt, np.sqrt(nd.link_wt) * rl])
                     delta = loss_scale * max(1.4826 * float(np.median(np.abs(z))), 1e-9)
-                sol = _solve_robust(m, nd, sol, side, loss, delta, max_iter)
+                sol = _solve_fast(m, nd, sol.th, side, loss, delta, max_iter)
             best = fits.get(side)
             if best is None or (not sol.success, sol.cost) < (not best.success, best.cost):
                 fits[side] = sol
                 deltas[side] = delta
 
-        sols = [_solve(m, nd, th0, side, "linear", 1.0, max_iter)
+        sols = [_solve_fast(m, nd, th0, side, "linear", 1.0, max_iter)
                 for th0 in scored[: max(1, m.starts)]]
         cut = sorted((i for i, s_ in enumerate(sols)
                       if s_.status == "Maximum_Iterations_Exceeded"), key=lambda i: sols[i].cost)
         if (cut and good_rms is not None and max_iter < _FINISH_ITER
                 and not any(s_.success and _rms_norm(m, s_, side, nd) * nd.scale <= good_rms
                             for s_ in sols)):
-            sols[cut[0]] = _solve(m, nd, sols[cut[0]].th, side, "linear", 1.0, _FINISH_ITER)
+            sols[cut[0]] = _solve_fast(m, nd, sols[cut[0]].th, side, "linear", 1.0,
+                                       _FINISH_ITER)
         for sol in sols:
             consider(sol)
     if not fits:
@@ -876,7 +897,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
         D = np.where(roles < 0, nd.scale, 1.0)
         cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
         n = data.n_contacts
-        q = scipy.stats.t.ppf(0.975, n - m.dof) if n > m.dof else np.nan
+        q = _t975(n - m.dof) if n > m.dof else np.nan
         sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
         k = 0
         for spec in m.params:
