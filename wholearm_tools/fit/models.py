@@ -549,16 +549,20 @@ def _cone_raw(ctx: InitContext, axis: FloatArray, cx: float, cy: float, k: float
     return np.concatenate([apex, axis, [alpha]])
 
 
-def _cone_init(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
-               ) -> list[FloatArray]:
+def _cone_init(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0,
+               directions: FloatArray | None = None,
+               steps: tuple[float, ...] = (0.06, 0.02, 0.007, 0.0025, 0.0008),
+               local: FloatArray | None = None) -> list[FloatArray]:
     """Cone guesses by direction sampling: the algebraic fit of :func:`_cone_fits` about each of
     800 directions (both senses of the 400-direction hemisphere: a cone opens one way), the best
     ``keep`` mutually distinct axes refined by shrinking perturbations; then the local-normal /
     principal axes as a fallback."""
     X = ctx.surface_points
     out: list[FloatArray] = []
+    local = _LOCAL if local is None else local
     if len(X) >= 6:
-        dirs = np.vstack([_DIRECTIONS, -_DIRECTIONS])
+        hemi = _DIRECTIONS if directions is None else directions
+        dirs = np.vstack([hemi, -hemi])
         *_, score = _cone_fits(X, dirs)
         cos_min = np.cos(np.radians(min_angle_deg))
         chosen: list[FloatArray] = []
@@ -569,8 +573,8 @@ def _cone_init(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0
                 chosen.append(dirs[j])
         for axis in chosen:
             best_s = float(_cone_fits(X, axis[None])[4][0])
-            for step in (0.06, 0.02, 0.007, 0.0025, 0.0008):
-                C = axis[None] + step * _LOCAL
+            for step in steps:
+                C = axis[None] + step * local
                 C /= np.linalg.norm(C, axis=1, keepdims=True)
                 sc = _cone_fits(X, C)[4]
                 j = int(np.argmin(sc))
@@ -597,6 +601,8 @@ _register(Model(
     params=(ParamSpec("apex", 3, "point"), ParamSpec("axis", 3, "direction"),
             ParamSpec("half_angle", 1, "angle")),
     init=_cone_init, min_rank=3, starts=3,
+    quick_init=lambda ctx: _cone_init(ctx, keep=1, directions=_DIRECTIONS[::4],
+                                      steps=(0.06, 0.02, 0.007), local=_LOCAL[:40])[:1],
 ))
 
 

@@ -1,0 +1,735 @@
+"""Fit-and-grow as one inference loop: proposals, one score, selection, assignment, refits.
+
+The map is the set of primitives that best **describes** the contacts (Leonardis, Gupta &
+Bajcsy 1995: fit-and-grow with model selection), scored by one negative log-likelihood in nats:
+
+* each contact ``i`` is a mixture of its readings ``r`` (:mod:`wholearm_tools.fit.readings`:
+  the sphere or the side of each candidate link, with priors from the link identification and
+  eq. (2)'s ``P_T``) and an outlier reading.  Explained by primitive ``k`` it costs
+  ``-log sum_r pi_r exp(-z_rk^2 / 2)`` with ``z_rk`` the reading's residual in noise sigmas
+  (and ``-log(1 - outlier_prior)``); unexplained, ``-log(outlier_prior) + log(L / (sqrt(2 pi)
+  sigma))`` for a scene of size ``L``.  It takes the cheapest;
+* each primitive costs ``bic * dof / 2 * log(N)`` (BIC), and its **free-space term**: the robot
+  occupied space where the primitive says the surface is, over the region its contacts span,
+  contradicts it.  The share ``f_k`` of sample points of that region the robot's sweep cuts
+  into (deeper than the noise) is the probability that any one of its contacts is read onto a
+  surface that is not there; it costs ``f_k`` of its contacts' unexplained cost;
+* a closed primitive (circle, sphere) whose inside is free space must hold the robot's base
+  (the arm reaches every contact from its base through free space).
+
+Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled contacts, each
+neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
+connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
+unions of two selected primitives, and lower-dimensional types on a selected one's contacts.
+A proposer never accepts or rejects: selection minimises the score (greedy additions, then
+single additions and removals until it stops falling).  Assignment (each contact to its
+cheapest primitive and reading, posterior reading weights) and refits alternate with selection
+until the score stops falling — the classification is the E-step of the fit.  The noise level
+is re-estimated from the assigned residuals at each round.
+
+What reaches the map is decided once, by :mod:`wholearm_tools.fit.gate`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from wholearm_tools.fit.core import fit_primitive, residuals
+from wholearm_tools.fit.data import FitData, Sweep
+from wholearm_tools.fit.models import MODELS, InitContext
+from wholearm_tools.fit.policy import FitPolicy
+from wholearm_tools.fit.readings import Readings
+from wholearm_tools.fit.result import FitResult
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: radius-like parameters of each curved type (checked against the policy's radius bounds)
+RADII = {"circle": ("radius",), "sphere": ("radius",), "cylinder": ("radius",),
+         "torus": ("minor_radius", "major_radius")}
+#: closed types: free space inside means the robot, base included, is inside
+CLOSED = ("circle", "sphere")
+#: candidate types per dimension, fewest parameters first
+DEFAULT_KINDS = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
+
+
+@dataclass(eq=False)
+class Hypothesis:
+    """A proposed primitive: its fit on the readings ``reading`` of contacts ``members``.
+
+    ``res`` (residual of every reading), ``cost`` (each contact's cost when this primitive
+    explains it), ``free`` (its free-space share ``f``) are filled by the scorer.
+    """
+
+    kind: str
+    fit: FitResult
+    members: IntArray
+    reading: IntArray
+    origin: str
+    res: FloatArray | None = None
+    cost: FloatArray | None = None
+    free: float = 0.0
+    sigma: float = math.nan
+
+    @property
+    def dof(self) -> int:
+        return MODELS[self.kind].dof
+
+
+@dataclass(frozen=True)
+class Inference:
+    """The result of :func:`infer`.
+
+    ``selected``: the primitives that describe the contacts best; ``assignment (M,)``: the
+    primitive of each contact (-1 unexplained); ``reading (M,)``: the reading it is explained
+    by (its prior-best where unexplained); ``posterior (R,)``: each reading's posterior
+    probability (over the readings of its contact) under the assigned primitive (the prior
+    where unexplained); ``sigma``: the noise level; ``score``: the final description length;
+    ``extent``: the scene size; ``history``: the score after each round.
+    """
+
+    selected: tuple[Hypothesis, ...]
+    assignment: IntArray
+    reading: IntArray
+    posterior: FloatArray
+    sigma: float
+    score: float
+    extent: float
+    history: tuple[float, ...] = ()
+    messages: tuple[str, ...] = field(default_factory=tuple)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _logsumexp_by_contact(v: FloatArray, starts: IntArray) -> FloatArray:
+    """Per contact, ``log sum exp`` of the values of its readings (readings sorted by contact)."""
+    mx = np.maximum.reduceat(v, starts)
+    n_per = np.diff(np.r_[starts, len(v)])
+    return mx + np.log(np.add.reduceat(np.exp(v - np.repeat(mx, n_per)), starts))
+
+
+def truncated_sigma(r: ArrayLike, start: float, k: float, rounds: int = 30) -> float:
+    """Noise level from residuals of which only those within ``k sigma`` are inliers: the fixed
+    point of ``sigma = rms(r[|r| <= k sigma]) / sqrt(c(k))``, ``c(k)`` the variance ratio of a
+    normal truncated at ``k`` (a gate biases a plain RMS low)."""
+    r = np.abs(np.asarray(r, dtype=float))
+    r = r[np.isfinite(r)]
+    if r.size == 0 or not start > 0:
+        return float(start)
+    phi = math.exp(-0.5 * k * k) / math.sqrt(2 * math.pi)
+    ratio = 1.0 - 2.0 * k * phi / math.erf(k / math.sqrt(2))
+    s = float(start)
+    for _ in range(rounds):
+        inl = r[r <= k * s]
+        if inl.size < 3:
+            break
+        nxt = math.sqrt(float(np.mean(inl * inl)) / ratio)
+        if not nxt > 0 or abs(nxt - s) <= 1e-6 * s:
+            s = nxt if nxt > 0 else s
+            break
+        s = nxt
+    return s
+
+
+def _farthest(X: FloatArray, k: int, rng: np.random.Generator) -> list[int]:
+    n = len(X)
+    if n == 0:
+        return []
+    order = [int(rng.integers(n))]
+    dmin = np.linalg.norm(X - X[order[0]], axis=1)
+    while len(order) < min(k, n):
+        i = int(np.argmax(dmin))
+        if dmin[i] <= 0:
+            break
+        order.append(i)
+        dmin = np.minimum(dmin, np.linalg.norm(X - X[i], axis=1))
+    return order
+
+
+def _mst_edges(X: FloatArray) -> list[tuple[int, int]]:
+    """Edges of the Euclidean minimum spanning tree of ``X`` (Prim, dense: supports are small)."""
+    n = len(X)
+    if n < 2:
+        return []
+    inside = np.zeros(n, dtype=bool)
+    inside[0] = True
+    best = np.linalg.norm(X - X[0], axis=1)
+    parent = np.zeros(n, dtype=int)
+    edges = []
+    for _ in range(n - 1):
+        cand = np.where(inside, np.inf, best)
+        j = int(np.argmin(cand))
+        edges.append((int(parent[j]), j))
+        inside[j] = True
+        d = np.linalg.norm(X - X[j], axis=1)
+        closer = d < best
+        parent[closer] = j
+        best = np.minimum(best, d)
+    return edges
+
+
+# --------------------------------------------------------------------------- the scorer
+
+
+class Scorer:
+    """Residuals of every reading under a hypothesis, and the description length of a set."""
+
+    def __init__(self, readings: Readings, policy: FitPolicy, sigma: float, extent: float,
+                 sweep: Sweep | None, base: FloatArray | None, B: float) -> None:
+        self.readings = readings
+        self.policy = policy
+        self.extent = extent
+        self.sweep = sweep
+        self.base = base
+        self.B = B
+        self.all_data = readings.fit_data()
+        self.n = readings.n_contacts
+        self.set_sigma(sigma)
+
+    def set_sigma(self, sigma: float) -> None:
+        self.sigma = float(sigma)
+        p = self.policy
+        self.c_out = (-math.log(p.outlier_prior)
+                      + math.log(max(self.extent / (math.sqrt(2 * math.pi) * self.sigma),
+                                     math.e)))
+        self.c_in = -math.log(1.0 - p.outlier_prior)
+        self.model_unit = 0.5 * p.bic * math.log(max(self.n, 2))
+        self.sweep_tol = max(p.sweep_tol_sigmas * self.sigma, p.sweep_tol_min)
+
+    # ---- per hypothesis
+    def residuals(self, h: Hypothesis) -> FloatArray:
+        if h.res is None:
+            r = residuals(h.kind, h.fit.params, self.all_data, h.fit.free_side)
+            h.res = self.readings.from_fit_rows(r)
+        return h.res
+
+    def score(self, h: Hypothesis) -> Hypothesis:
+        """Fill ``h.cost`` and ``h.free`` at the current noise level."""
+        if h.sigma == self.sigma and h.cost is not None:
+            return h
+        res = self.residuals(h)
+        z = res / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
+        h.cost = self.c_in - _logsumexp_by_contact(v, self.readings.starts)
+        h.free = self.free_share(h)
+        h.sigma = self.sigma
+        return h
+
+    def posterior(self, h: Hypothesis) -> FloatArray:
+        """Posterior probability of each reading given that ``h`` explains its contact."""
+        z = self.residuals(h) / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
+        lse = _logsumexp_by_contact(v, self.readings.starts)
+        return np.exp(v - lse[self.readings.contact])
+
+    def best_reading(self, h: Hypothesis) -> IntArray:
+        """Each contact's most probable reading under ``h``, ``(M,)`` reading indices."""
+        z = self.residuals(h) / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
+        out = np.empty(self.n, dtype=np.int64)
+        st = self.readings.starts
+        ends = np.r_[st[1:], len(v)]
+        for i, (s, e) in enumerate(zip(st, ends, strict=True)):
+            out[i] = s + int(np.argmax(v[s:e]))
+        return out
+
+    def support_points(self, h: Hypothesis) -> FloatArray:
+        """Where the member readings touch the primitive (their feet on the surface)."""
+        prim = h.fit.primitive
+        rd = self.readings
+        idx = h.reading
+        a, b = rd.a[idx], rd.b[idx]
+        _, t = prim.segment_signed_distance(a, b, free_side=h.fit.free_side)
+        x = a + np.asarray(t)[:, None] * (b - a)
+        return np.asarray(prim.closest_point(x))
+
+    def free_share(self, h: Hypothesis) -> float:
+        """Share of the region a hypothesis' contacts span that the robot's sweep cuts into
+        (the free-space term), or 1 for a closed primitive with the base outside its free
+        side."""
+        prim = h.fit.primitive
+        if prim is None:
+            return 1.0
+        if (self.base is not None and h.kind in CLOSED and h.fit.free_side < 0
+                and float(prim.signed_distance(self.base[None])[0]) > 0):
+            return 1.0
+        if self.sweep is None or len(self.sweep) == 0 or len(h.members) == 0:
+            return 0.0
+        feet = self.support_points(h)
+        samples = [feet]
+        step = max(self.B, 1e-3 * self.extent)
+        for i, j in _mst_edges(feet):
+            length = float(np.linalg.norm(feet[j] - feet[i]))
+            k = min(int(length / step), 16)
+            if k >= 1:
+                s = (np.arange(1, k + 1) / (k + 1))[:, None]
+                samples.append(np.asarray(prim.closest_point(feet[i] + s * (feet[j] - feet[i]))))
+        x = np.vstack(samples)
+        normal = np.asarray(prim.gradient(x)) * h.fit.free_side
+        inside = x - self.sweep_tol * normal  # just behind the surface, in its material
+        return float(np.mean(_in_sweep(self.sweep, inside)))
+
+    # ---- sets
+    def total(self, chosen: Sequence[Hypothesis]) -> float:
+        cur = np.full(self.n, self.c_out)
+        extra = 0.0
+        for h in chosen:
+            cur = np.minimum(cur, h.cost)
+            extra += self.model_cost(h)
+        return float(np.sum(cur)) + extra
+
+    def model_cost(self, h: Hypothesis) -> float:
+        n_mem = max(len(h.members), 1)
+        return h.dof * self.model_unit + h.free * n_mem * self.c_out
+
+    def select(self, pool: Sequence[Hypothesis], start: Sequence[Hypothesis] = ()
+               ) -> list[Hypothesis]:
+        """The subset of ``pool`` of least total description length: greedy additions, then
+        single additions and removals while the total falls."""
+        chosen = list(start)
+        cur = np.full(self.n, self.c_out)
+        for h in chosen:
+            cur = np.minimum(cur, h.cost)
+
+        def gain(h: Hypothesis, cur: FloatArray) -> float:
+            return float(np.sum(np.maximum(cur - h.cost, 0.0))) - self.model_cost(h)
+
+        while True:
+            best, best_h = 1e-9, None
+            for h in pool:
+                if any(h is c for c in chosen):
+                    continue
+                g = gain(h, cur)
+                if g > best:
+                    best, best_h = g, h
+            if best_h is None:
+                break
+            chosen.append(best_h)
+            cur = np.minimum(cur, best_h.cost)
+        # removals: a primitive the others (now) make redundant
+        changed = True
+        while changed and chosen:
+            changed = False
+            total = self.total(chosen)
+            for h in list(chosen):
+                rest = [c for c in chosen if c is not h]
+                if self.total(rest) < total - 1e-9:
+                    chosen = rest
+                    changed = True
+                    break
+            if not changed:
+                # swaps: one out, one in
+                for h in list(chosen):
+                    rest = [c for c in chosen if c is not h]
+                    cur_r = np.full(self.n, self.c_out)
+                    for c in rest:
+                        cur_r = np.minimum(cur_r, c.cost)
+                    for g in pool:
+                        if any(g is c for c in chosen):
+                            continue
+                        if self.total([*rest, g]) < total - 1e-9:
+                            chosen = [*rest, g]
+                            changed = True
+                            break
+                    if changed:
+                        break
+        return chosen
+
+    def assign(self, chosen: Sequence[Hypothesis]) -> IntArray:
+        """Each contact's cheapest selected primitive, -1 where the outlier reading is cheaper."""
+        if not chosen:
+            return np.full(self.n, -1, dtype=np.int64)
+        C = np.stack([h.cost for h in chosen])
+        k = np.argmin(C, axis=0)
+        return np.where(C[k, np.arange(self.n)] < self.c_out, k, -1).astype(np.int64)
+
+
+def _in_sweep(sweep: Sweep, points: FloatArray) -> NDArray[np.bool_]:
+    """Whether each point lies inside one of the sweep's capsules."""
+    out = np.zeros(len(points), dtype=bool)
+    if len(points) == 0:
+        return out
+    hits = sweep._tree.query_ball_point(points, sweep._reach)
+    pi = np.repeat(np.arange(len(points)), [len(h) for h in hits])
+    if pi.size == 0:
+        return out
+    ci = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])
+    a, b, r = sweep.a[ci], sweep.b[ci], sweep.radius[ci]
+    d = b - a
+    p = points[pi]
+    L2 = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(L2, 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(p - a - t[:, None] * d, axis=1)
+    np.logical_or.at(out, pi, dist < r)
+    return out
+
+
+# --------------------------------------------------------------------------- proposals
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What every proposal of one :func:`infer` call shares (picklable for worker processes)."""
+
+    readings: Readings
+    kinds: tuple[str, ...]
+    rep: FloatArray             # (M, d) one representative point per contact
+    order: IntArray             # (M, M) contacts by distance from each contact
+    sigma: float
+    tol: float                  # consensus inlier tolerance [m]
+    min_radius: float
+    max_radius_ratio: float
+    seed_extra: int
+    trials: int
+    key: int
+
+
+def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
+    if not fit or fit.primitive is None:
+        return False
+    for name in RADII.get(ctx_kind, ()):
+        r = float(fit.params[name])
+        if not (min_radius <= r <= max_ratio * fit.scale):
+            return False
+    return True
+
+
+def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
+                 start: FitResult | None = None, loss: str = "linear",
+                 noise: float | None = None) -> FitResult:
+    """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given)."""
+    data = readings.fit_data(idx, weight)
+    if start is not None and start.kind == kind and start:
+        f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
+                          loss=loss, noise=noise)
+        if f:
+            return f
+    return fit_primitive(kind, data, loss=loss, noise=noise)
+
+
+def _quick_guesses(kind: str, readings: Readings, idx: IntArray
+                   ) -> list[tuple[float, FloatArray, object]]:
+    """Algebraic guesses (no solver) of ``kind`` through readings ``idx``, both free sides:
+    ``(free side, raw normalised parameters, the normalisation)``."""
+    from wholearm_tools.fit.core import _normalise
+
+    m = MODELS[kind]
+    data = readings.fit_data(idx)
+    nd = _normalise(data)
+    if nd is None:
+        return []
+    out = []
+    for side in ([1.0] if m.linear else [1.0, -1.0]):
+        ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
+        try:
+            guess = m.quick_init(ctx) if m.quick_init else m.init(ctx)[:1]
+        except (np.linalg.LinAlgError, ValueError, IndexError):
+            continue
+        for th in guess:
+            if np.all(np.isfinite(th)):
+                out.append((side, th, nd))
+    return out
+
+
+def _guess_residuals(kind: str, side: float, th: FloatArray, nd: object, data: FitData
+                     ) -> FloatArray:
+    """Residuals [m] of ``data`` (fit order: tips, then links) under a normalised raw guess."""
+    from wholearm_tools.fit.core import _Norm, _residuals_norm
+
+    m = MODELS[kind]
+    mu, scale = nd.mu, nd.scale  # type: ignore[attr-defined]
+    nd2 = _Norm(mu, scale, (data.tip_points - mu) / scale, data.tip_radius / scale,
+                data.tip_weight, (data.link_a - mu) / scale, (data.link_b - mu) / scale,
+                data.link_radius / scale, data.link_weight, data.free_points)
+    rt, rl, _, _ = _residuals_norm(m, th, side, nd2)
+    return np.concatenate([rt, rl]) * scale
+
+
+def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
+    """Hypotheses at one seed contact, one per type: the consensus of random minimal sets of
+    readings among its nearest contacts (RANSAC), fitted on the consensus readings.  The types
+    with more than five parameters (cone, torus: they fit almost any small patch, and their
+    guesses are the slowest) are tried only where no simpler type takes most of the
+    neighbourhood; they are also offered as refits of selected primitives."""
+    rng = np.random.default_rng([ctx.key, anchor])
+    rd = ctx.readings
+    out: list[tuple[str, IntArray, IntArray, FitResult]] = []
+    cheap = [k for k in ctx.kinds if MODELS[k].dof <= 5]
+    costly = [k for k in ctx.kinds if MODELS[k].dof > 5]
+    taken = 0
+    for kind in [*cheap, *costly]:
+        m = MODELS[kind]
+        size = m.dof + 2 + ctx.seed_extra
+        if kind in costly and taken >= m.dof + 2 + ctx.seed_extra // 2:
+            break
+        near = ctx.order[anchor, :size]
+        if len(near) < m.dof + 2:
+            continue
+        sel = np.flatnonzero(np.isin(rd.contact, near))
+        data_sel = rd.fit_data(sel)
+        pos_sel = Readings.fit_order(rd.sphere[sel])
+        others = near[near != anchor]
+        best_key, best = (-1, -np.inf), None
+        for _ in range(ctx.trials):
+            pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)), replace=False)]
+            idx = []
+            for c in pick:  # one reading per picked contact, drawn by prior
+                rs = np.flatnonzero(rd.contact == c)
+                p = np.exp(rd.log_prior[rs])
+                idx.append(int(rng.choice(rs, p=p / p.sum())))
+            for side, th, nd in _quick_guesses(kind, rd, np.array(idx)):
+                r = np.abs(_guess_residuals(kind, side, th, nd, data_sel))[pos_sel]
+                best_r = np.full(rd.n_contacts, np.inf)
+                np.minimum.at(best_r, rd.contact[sel], r)
+                inl = near[best_r[near] <= ctx.tol]
+                if anchor not in inl:
+                    continue
+                key = (len(inl), -float(np.sum(np.minimum(best_r[near], ctx.tol) ** 2)))
+                if key > best_key:
+                    best_key, best = key, (inl, r)
+            if best is not None and len(best[0]) == len(near):
+                break
+        if best is None or len(best[0]) < m.dof + 2:
+            continue
+        inl, r = best
+        reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
+                            for c in np.sort(inl)])
+        f = fit_readings(kind, rd, reading)
+        if not _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
+            continue
+        taken = max(taken, len(inl))
+        out.append((kind, np.sort(inl), reading, f))
+    return out
+
+
+def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
+               ) -> list[tuple[str, IntArray, IntArray, FitResult]]:
+    if executor is None or len(anchors) < 2:
+        res = [_seed(ctx, a) for a in anchors]
+    else:
+        res = list(executor.map(_seed, [ctx] * len(anchors), anchors))
+    return [h for hs in res for h in hs]
+
+
+# --------------------------------------------------------------------------- the loop
+
+
+def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
+          policy: FitPolicy | None = None, B: float = 0.02, noise_floor: float = 0.0,
+          sweep: Sweep | None = None, base: ArrayLike | None = None,
+          rng: int | np.random.Generator | None = 0, executor: Executor | None = None,
+          ) -> Inference:
+    """Describe ``readings`` by primitives: the loop of the module docstring.
+
+    Parameters
+    ----------
+    readings : the contacts' readings (:func:`wholearm_tools.fit.readings.readings_from_contacts`)
+    kinds : candidate types (default: all of the dimension), fewest parameters first
+    policy : :class:`FitPolicy`
+    B : smallest expected curvature radius [m] (radius floor, support sampling step)
+    noise_floor : smallest noise level [m] (the encoder resolution at the contacts)
+    sweep : the robot's capsules over the run (free space); base : the robot's base point
+    rng : seeds the proposals; the result depends on nothing else (not on ``executor``)
+    executor : runs the seed proposals (e.g. a process pool)
+    """
+    policy = policy or FitPolicy()
+    rng = np.random.default_rng(rng)
+    dim = readings.dim
+    kinds = tuple(DEFAULT_KINDS[dim] if kinds is None else kinds)
+    m_all = readings.n_contacts
+    base_pt = None if base is None else np.asarray(base, dtype=float).reshape(dim)
+    pts_all = np.vstack([readings.a, readings.b])
+    extent = float(np.linalg.norm(pts_all.max(axis=0) - pts_all.min(axis=0))) if m_all else 0.0
+    empty = Inference((), np.full(m_all, -1), np.zeros(m_all, dtype=np.int64),
+                      np.exp(readings.log_prior), float(policy.noise or noise_floor), 0.0,
+                      extent)
+    min_need = min(MODELS[k].dof for k in kinds) + 2
+    if m_all < min_need or extent <= 0:
+        return empty
+
+    # representative point per contact: its most probable reading's point
+    lp = readings.log_prior
+    st = readings.starts
+    prior_best = np.array([s + int(np.argmax(lp[s:e]))
+                           for s, e in zip(st, np.r_[st[1:], len(lp)], strict=True)])
+    rep = readings.points()[prior_best]
+    D = np.linalg.norm(rep[:, None, :] - rep[None, :, :], axis=2)
+    order = np.argsort(D, axis=1, kind="stable")
+    adj = np.zeros((m_all, m_all), dtype=bool)
+    kn = min(policy.neighbours, m_all - 1)
+    adj[np.repeat(np.arange(m_all), kn), order[:, 1:kn + 1].ravel()] = True
+    adj |= adj.T
+
+    floor = max(float(noise_floor), 1e-6 * extent)
+    sigma = float(policy.noise) if policy.noise else floor
+    min_radius = policy.min_radius_B * B
+    scorer = Scorer(readings, policy, sigma, extent, sweep, base_pt, B)
+    key = int(rng.integers(2**63))
+
+    def context(sig: float) -> _Context:
+        return _Context(readings, kinds, rep, order, sig, max(30.0 * sig, 1e-3 * extent),
+                        min_radius, policy.max_radius_ratio, policy.seed_extra,
+                        policy.consensus_trials, key)
+
+    def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
+             origin: str) -> Hypothesis | None:
+        if not _admissible(kind, fit, min_radius, policy.max_radius_ratio):
+            return None
+        return scorer.score(Hypothesis(kind, fit, np.asarray(members), np.asarray(reading),
+                                       origin))
+
+    def refit(h: Hypothesis, members: IntArray, origin: str) -> Hypothesis | None:
+        """``h`` refitted on ``members``, each by its most probable reading under ``h`` with
+        its posterior as weight."""
+        if len(members) < h.dof + 1:
+            return None
+        best = scorer.best_reading(h)[members]
+        post = scorer.posterior(h)[best]
+        f = fit_readings(h.kind, readings, best, np.maximum(post, 0.05), start=h.fit)
+        return make(h.kind, f, members, best, origin)
+
+    def grow(h: Hypothesis, rounds: int = 8) -> Hypothesis:
+        """Every contact connected to ``h``'s members through contacts with a reading within
+        ``k_sigma``, refitted, until the set stops changing."""
+        for _ in range(rounds):
+            res = np.abs(scorer.residuals(h))
+            best_r = np.full(m_all, np.inf)
+            np.minimum.at(best_r, readings.contact, res)
+            inl = best_r <= policy.k_sigma * scorer.sigma
+            reach = np.zeros(m_all, dtype=bool)
+            frontier = h.members[inl[h.members]]
+            reach[frontier] = True
+            while frontier.size:
+                nxt = np.flatnonzero(adj[frontier].any(axis=0) & inl & ~reach)
+                reach[nxt] = True
+                frontier = nxt
+            new = np.flatnonzero(reach)
+            if np.array_equal(new, h.members) or len(new) < h.dof + 2:
+                return h
+            g = refit(h, new, "growth")
+            if g is None:
+                return h
+            h = g
+        return h
+
+    pool: list[Hypothesis] = []
+
+    def add(hs: Sequence[Hypothesis | None]) -> None:
+        seen = {(h.kind, h.members.tobytes(), h.reading.tobytes()) for h in pool}
+        for h in hs:
+            if h is None:
+                continue
+            k_ = (h.kind, h.members.tobytes(), h.reading.tobytes())
+            if k_ not in seen:
+                seen.add(k_)
+                pool.append(h)
+
+    # ---- first seeds: the noise level from the best seeds, then consensus seeds
+    anchors = _farthest(rep, policy.max_seeds, rng)
+    raw = _seed_many(context(sigma), anchors, executor)
+    if policy.noise is None and raw:
+        best = np.array([_rms_dof(f) for _, _, _, f in raw])
+        best = best[np.isfinite(best)]
+        if best.size:
+            # a seed inside one surface fits at the noise level: the lower decile of the seed
+            # RMS (dof-corrected, dof + 2 + extra contacts) estimates it; mixed seeds fit worse
+            sigma = max(float(np.percentile(best, 10)), floor)
+            scorer.set_sigma(sigma)
+    seeds = [make(k, f, mem, rd, "seed") for k, mem, rd, f in raw]
+    add([grow(h) for h in seeds if h is not None])
+
+    history: list[float] = []
+    chosen: list[Hypothesis] = []
+    messages: list[str] = []
+    for round_ in range(policy.rounds):
+        for _ in range(policy.em_rounds):
+            for h in pool:
+                scorer.score(h)
+            chosen = scorer.select(pool)
+            total = scorer.total(chosen)
+            history.append(total)
+            if len(history) > 1 and total >= history[-2] - 1e-6 * abs(history[-2]):
+                break
+            # assignment -> refit -> growth
+            assign = scorer.assign(chosen)
+            new: list[Hypothesis | None] = []
+            for i, h in enumerate(chosen):
+                mem = np.flatnonzero(assign == i)
+                g = refit(h, mem, "refit")
+                if g is not None:
+                    new.append(grow(g))
+            add(new)
+            # noise level from the assigned residuals
+            if policy.noise is None and chosen:
+                R = np.concatenate([np.abs(h.res[scorer.best_reading(h)[assign == i]])
+                                    for i, h in enumerate(chosen)])
+                s_new = max(truncated_sigma(R, scorer.sigma, policy.k_sigma), floor)
+                if abs(s_new - scorer.sigma) > 0.05 * scorer.sigma:
+                    scorer.set_sigma(s_new)
+        # ---- further proposals: unions, simpler types, seeds among unexplained contacts
+        assign = scorer.assign(chosen)
+        extra: list[Hypothesis | None] = []
+        for i, h in enumerate(chosen):
+            mem = np.flatnonzero(assign == i)
+            for k in kinds:  # the same contacts as every other type (BIC decides)
+                if k != h.kind and len(mem) >= MODELS[k].dof + 2:
+                    best = scorer.best_reading(h)[mem]
+                    f = fit_readings(k, readings, best)
+                    extra.append(make(k, f, mem, best, "other type"))
+            for j in range(i + 1, len(chosen)):
+                g_ = chosen[j]
+                union = np.union1d(mem, np.flatnonzero(assign == j))
+                for hh in (h, g_):
+                    u = refit(hh, union, "union")
+                    if u is not None:
+                        extra.append(grow(u))
+        left = np.flatnonzero(assign < 0)
+        if len(left) >= min_need:
+            ctx = context(scorer.sigma)
+            ctx = replace(ctx, order=_restricted_order(order, left))
+            picks = [int(left[i]) for i in _farthest(rep[left], max(policy.max_seeds // 2, 1),
+                                                      rng)]
+            for k, mem, rd_, f in _seed_many(ctx, picks, executor):
+                h = make(k, f, mem, rd_, "seed")
+                if h is not None:
+                    extra.append(grow(h))
+        n_before = len(pool)
+        add(extra)
+        if len(pool) == n_before:
+            break
+    for h in pool:
+        scorer.score(h)
+    chosen = scorer.select(pool)
+    history.append(scorer.total(chosen))
+    assign = scorer.assign(chosen)
+    reading = prior_best.copy()
+    posterior = np.exp(readings.log_prior)
+    for i, h in enumerate(chosen):
+        mem = assign == i
+        reading[mem] = scorer.best_reading(h)[mem]
+        post = scorer.posterior(h)
+        rows = np.isin(readings.contact, np.flatnonzero(mem))
+        posterior[rows] = post[rows]
+    return Inference(tuple(chosen), assign, reading, posterior, scorer.sigma, history[-1], extent,
+                     tuple(history), tuple(messages))
+
+
+def _restricted_order(order: IntArray, allowed: IntArray) -> IntArray:
+    """``order`` with each row keeping only the contacts in ``allowed`` (in the same order),
+    padded with the others after them (seed neighbourhoods among unexplained contacts)."""
+    ok = np.zeros(order.shape[1], dtype=bool)
+    ok[allowed] = True
+    keep = ok[order]
+    return np.take_along_axis(order, np.argsort(~keep, axis=1, kind="stable"), axis=1)
+
+
+def _rms_dof(fit: FitResult) -> float:
+    r = fit.residuals
+    return float(np.sqrt(np.sum(r * r) / max(len(r) - MODELS[fit.kind].dof, 1)))

@@ -1,0 +1,99 @@
+"""The inference loop's parameters, in one frozen record.
+
+Every number the reconstruction uses to decide what the contacts show lives here, with what it
+means; nothing in :mod:`wholearm_tools.fit.infer` or :mod:`wholearm_tools.fit.gate` is a module
+constant.  The defaults are the method's, stated in physical terms (probabilities, noise
+levels, sigmas); none is tuned to a scenario.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from wholearm_tools.errors import InputError
+
+
+@dataclass(frozen=True, slots=True)
+class FitPolicy:
+    """What the inference loop assumes and how hard it searches.
+
+    The score (negative log-likelihood in nats, :mod:`wholearm_tools.fit.infer`)
+    ------------------------------------------------------------------------
+    outlier_prior : prior probability that a detected contact is on no surface the map will
+        hold (a false detection, a surface touched too rarely to fit); an unexplained contact
+        costs ``-log(outlier_prior) + log(L / (sqrt(2 pi) sigma))`` against an explained one's
+        ``-log(prior of its reading) + z^2 / 2``, with ``L`` the scene size.
+    bic : cost of each primitive parameter, ``bic * log(N) / 2`` (BIC: 1).
+    k_sigma : a reading farther than ``k_sigma`` noise sigmas from a hypothesis does not join
+        it in growth (the score itself is continuous).
+    sweep_tol_sigmas, sweep_tol_min : the robot's sweep contradicts a hypothesis where it cuts
+        into the surface deeper than ``max(sweep_tol_sigmas * sigma, sweep_tol_min)`` [m].
+
+    The search (proposals never accept or reject; they only offer hypotheses)
+    -----------------------------------------------------------------------
+    max_seeds : seed contacts per round (farthest-point sampled).
+    seed_extra : a seed's neighbourhood is its ``dof + 2 + seed_extra`` nearest contacts, cut
+        to the consensus of ``consensus_trials`` random minimal sets (RANSAC).
+    rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
+    em_rounds : most assign -> refit -> select iterations.
+    neighbours : contacts per contact in the growth graph.
+
+    The noise
+    ---------
+    noise : contact noise sigma [m]; None estimates it from the residuals (floored at the
+        encoder resolution the pipeline passes).
+
+    The report gate (:mod:`wholearm_tools.fit.gate`)
+    ----------------------------------------------
+    kinematic_error : the stated kinematic error model, as the standard deviation of a
+        contact's position from encoder noise, joint offsets and link-length errors, in
+        units of the robot's reach (of the scene size without a robot): 5e-4 is 0.5 mm on a
+        1 m arm.
+    max_rel_std : a reported primitive's worst-determined parameter combination, under that
+        error model, must have a standard deviation of at most this fraction of the size of
+        its support.
+    max_influence : ... and no single contact may carry more than this share of the
+        information in any direction (its leverage): above it, that one inferred contact alone
+        decides the primitive and its residual cannot show whether it is wrong.
+
+    Types
+    -----
+    min_radius_B : the smallest admissible radius of a curved primitive, in units of B (the
+        smallest expected curvature radius).
+    max_radius_ratio : the largest, in units of the support's RMS spread.
+    """
+
+    outlier_prior: float = 0.05
+    bic: float = 1.0
+    k_sigma: float = 3.0
+    sweep_tol_sigmas: float = 5.0
+    sweep_tol_min: float = 2e-3
+    max_seeds: int = 16
+    seed_extra: int = 6
+    consensus_trials: int = 24
+    rounds: int = 3
+    em_rounds: int = 6
+    neighbours: int = 6
+    noise: float | None = None
+    kinematic_error: float = 5e-4
+    max_rel_std: float = 0.2
+    max_influence: float = 0.95
+    min_radius_B: float = 0.5
+    max_radius_ratio: float = 50.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.outlier_prior < 1.0:
+            raise InputError(f"outlier_prior must be in (0, 1), got {self.outlier_prior}")
+        for name in ("bic", "k_sigma", "sweep_tol_sigmas", "kinematic_error", "max_rel_std",
+                     "max_radius_ratio"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be a positive number, got {value!r}")
+        for name in ("max_seeds", "consensus_trials", "rounds", "em_rounds", "neighbours"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
+        if not 0.0 < self.max_influence <= 1.0:
+            raise InputError(f"max_influence must be in (0, 1], got {self.max_influence}")
+        if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):
+            raise InputError(f"noise must be a positive length, got {self.noise!r}")
