@@ -64,7 +64,7 @@ class Hypothesis:
     """A proposed primitive: its fit on the readings ``reading`` of contacts ``members``.
 
     ``res`` (residual of every reading), ``cost`` (each contact's cost when this primitive
-    explains it), ``free`` (its free-space share ``f``) are filled by the scorer.
+    explains it), ``free`` (the sweep's cuts into its support) are filled by the scorer.
     """
 
     kind: str
@@ -74,7 +74,7 @@ class Hypothesis:
     origin: str
     res: FloatArray | None = None
     cost: FloatArray | None = None
-    free: float = 0.0
+    free: float = 0.0          # sweep cuts in its support (see Scorer.free_share)
     sigma: float = math.nan
 
     @property
@@ -251,15 +251,16 @@ class Scorer:
         return np.asarray(prim.closest_point(x))
 
     def free_share(self, h: Hypothesis) -> float:
-        """Share of the region a hypothesis' contacts span that the robot's sweep cuts into
-        (the free-space term), or 1 for a closed primitive with the base outside its free
-        side."""
+        """Number of sample points of the region a hypothesis' contacts span (their feet, and
+        points every ``B`` along the edges of their minimum spanning tree, on the surface) that
+        the robot's sweep cuts into: the free-space term.  Infinite for a closed primitive with
+        the base outside its free side."""
         prim = h.fit.primitive
         if prim is None:
-            return 1.0
+            return math.inf
         if (self.base is not None and h.kind in CLOSED and h.fit.free_side < 0
                 and float(prim.signed_distance(self.base[None])[0]) > 0):
-            return 1.0
+            return math.inf
         if self.sweep is None or len(self.sweep) == 0 or len(h.members) == 0:
             return 0.0
         feet = self.support_points(h)
@@ -274,7 +275,7 @@ class Scorer:
         x = np.vstack(samples)
         normal = np.asarray(prim.gradient(x)) * h.fit.free_side
         inside = x - self.sweep_tol * normal  # just behind the surface, in its material
-        return float(np.mean(_in_sweep(self.sweep, inside)))
+        return float(np.count_nonzero(_in_sweep(self.sweep, inside)))
 
     # ---- sets
     def total(self, chosen: Sequence[Hypothesis]) -> float:
@@ -286,8 +287,10 @@ class Scorer:
         return float(np.sum(cur)) + extra
 
     def model_cost(self, h: Hypothesis) -> float:
-        n_mem = max(len(h.members), 1)
-        return h.dof * self.model_unit + h.free * n_mem * self.c_out
+        """BIC and the free-space term: each sample of the hypothesis' support that the sweep
+        cuts is evidence against it as strong as a contact's for it (the cost of leaving a
+        contact unexplained)."""
+        return h.dof * self.model_unit + h.free * self.c_out
 
     def select(self, pool: Sequence[Hypothesis], start: Sequence[Hypothesis] = ()
                ) -> list[Hypothesis]:
@@ -381,6 +384,7 @@ class _Context:
     readings: Readings
     kinds: tuple[str, ...]
     rep: FloatArray             # (M, d) one representative point per contact
+    prior_best: IntArray        # (M,) each contact's most probable reading a priori
     order: IntArray             # (M, M) contacts by distance from each contact
     sigma: float
     tol: float                  # consensus inlier tolerance [m]
@@ -389,6 +393,8 @@ class _Context:
     seed_extra: int
     trials: int
     key: int
+    free: FloatArray            # (K, d) free-space points (robot positions)
+    max_iter: int               # solver iterations of a seed fit
 
 
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
@@ -402,16 +408,17 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
-                 start: FitResult | None = None, loss: str = "linear",
-                 noise: float | None = None) -> FitResult:
-    """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given)."""
-    data = readings.fit_data(idx, weight)
+                 start: FitResult | None = None, free_points: FloatArray | None = None,
+                 max_iter: int = 200) -> FitResult:
+    """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given); ``free_points``
+    (robot positions: free space) tell a closed primitive's free side."""
+    data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
-                          loss=loss, noise=noise)
+                          max_iter=max_iter)
         if f:
             return f
-    return fit_primitive(kind, data, loss=loss, noise=noise)
+    return fit_primitive(kind, data, max_iter=max_iter)
 
 
 def _quick_guesses(kind: str, readings: Readings, idx: IntArray
@@ -453,25 +460,28 @@ def _guess_residuals(kind: str, side: float, th: FloatArray, nd: object, data: F
 
 
 def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
-    """Hypotheses at one seed contact, one per type: the consensus of random minimal sets of
-    readings among its nearest contacts (RANSAC), fitted on the consensus readings.  The types
-    with more than five parameters (cone, torus: they fit almost any small patch, and their
-    guesses are the slowest) are tried only where no simpler type takes most of the
-    neighbourhood; they are also offered as refits of selected primitives."""
+    """Hypotheses at one seed contact, per type: a fit to its ``dof + 2`` nearest contacts (each
+    by its most probable reading), and the consensus of minimal sets of readings among its
+    ``dof + 2 + seed_extra`` nearest (RANSAC: near the edge of a surface the nearest contacts
+    mix two), fitted on the consensus readings.  Types with more than five parameters (cone,
+    torus) are not seeded: on a seed's few contacts they fit almost any patch and their guesses
+    are the slowest; they are offered as refits of the contacts of selected primitives, where
+    there are enough to tell them from the simpler types (:func:`infer`)."""
     rng = np.random.default_rng([ctx.key, anchor])
     rd = ctx.readings
     out: list[tuple[str, IntArray, IntArray, FitResult]] = []
-    cheap = [k for k in ctx.kinds if MODELS[k].dof <= 5]
-    costly = [k for k in ctx.kinds if MODELS[k].dof > 5]
-    taken = 0
-    for kind in [*cheap, *costly]:
+    for kind in ctx.kinds:
         m = MODELS[kind]
-        size = m.dof + 2 + ctx.seed_extra
-        if kind in costly and taken >= m.dof + 2 + ctx.seed_extra // 2:
-            break
-        near = ctx.order[anchor, :size]
-        if len(near) < m.dof + 2:
+        if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
             continue
+        plain = np.sort(ctx.order[anchor, :m.dof + 2])
+        if len(plain) < m.dof + 2:
+            continue
+        f = fit_readings(kind, rd, ctx.prior_best[plain], free_points=ctx.free,
+                         max_iter=ctx.max_iter)
+        if _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
+            out.append((kind, plain, ctx.prior_best[plain], f))
+        near = ctx.order[anchor, :m.dof + 2 + ctx.seed_extra]
         sel = np.flatnonzero(np.isin(rd.contact, near))
         data_sel = rd.fit_data(sel)
         pos_sel = Readings.fit_order(rd.sphere[sel])
@@ -479,12 +489,7 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         best_key, best = (-1, -np.inf), None
         for _ in range(ctx.trials):
             pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)), replace=False)]
-            idx = []
-            for c in pick:  # one reading per picked contact, drawn by prior
-                rs = np.flatnonzero(rd.contact == c)
-                p = np.exp(rd.log_prior[rs])
-                idx.append(int(rng.choice(rs, p=p / p.sum())))
-            for side, th, nd in _quick_guesses(kind, rd, np.array(idx)):
+            for side, th, nd in _quick_guesses(kind, rd, ctx.prior_best[pick]):
                 r = np.abs(_guess_residuals(kind, side, th, nd, data_sel))[pos_sel]
                 best_r = np.full(rd.n_contacts, np.inf)
                 np.minimum.at(best_r, rd.contact[sel], r)
@@ -501,10 +506,9 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         inl, r = best
         reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
                             for c in np.sort(inl)])
-        f = fit_readings(kind, rd, reading)
+        f = fit_readings(kind, rd, reading, free_points=ctx.free, max_iter=ctx.max_iter)
         if not _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
             continue
-        taken = max(taken, len(inl))
         out.append((kind, np.sort(inl), reading, f))
     return out
 
@@ -524,8 +528,8 @@ def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
 def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
           policy: FitPolicy | None = None, B: float = 0.02, noise_floor: float = 0.0,
           sweep: Sweep | None = None, base: ArrayLike | None = None,
-          rng: int | np.random.Generator | None = 0, executor: Executor | None = None,
-          ) -> Inference:
+          free_points: ArrayLike | None = None, rng: int | np.random.Generator | None = 0, executor: Executor | None = None,
+          diagnostics: dict | None = None) -> Inference:
     """Describe ``readings`` by primitives: the loop of the module docstring.
 
     Parameters
@@ -536,8 +540,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     B : smallest expected curvature radius [m] (radius floor, support sampling step)
     noise_floor : smallest noise level [m] (the encoder resolution at the contacts)
     sweep : the robot's capsules over the run (free space); base : the robot's base point
+    free_points : (K, d) points the robot occupied (free space; a fit's free side)
     rng : seeds the proposals; the result depends on nothing else (not on ``executor``)
     executor : runs the seed proposals (e.g. a process pool)
+    diagnostics : a dict that receives the hypothesis pool and the scorer (for study)
     """
     policy = policy or FitPolicy()
     rng = np.random.default_rng(rng)
@@ -567,6 +573,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     adj[np.repeat(np.arange(m_all), kn), order[:, 1:kn + 1].ravel()] = True
     adj |= adj.T
 
+    free = (np.zeros((0, dim)) if free_points is None
+            else np.asarray(free_points, dtype=float).reshape(-1, dim))
     floor = max(float(noise_floor), 1e-6 * extent)
     sigma = float(policy.noise) if policy.noise else floor
     min_radius = policy.min_radius_B * B
@@ -574,9 +582,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     key = int(rng.integers(2**63))
 
     def context(sig: float) -> _Context:
-        return _Context(readings, kinds, rep, order, sig, max(30.0 * sig, 1e-3 * extent),
+        return _Context(readings, kinds, rep, prior_best, order, sig, max(30.0 * sig, 1e-3 * extent),
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
-                        policy.consensus_trials, key)
+                        policy.consensus_trials, key, free, 30)
 
     def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
              origin: str) -> Hypothesis | None:
@@ -585,15 +593,23 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return scorer.score(Hypothesis(kind, fit, np.asarray(members), np.asarray(reading),
                                        origin))
 
-    def refit(h: Hypothesis, members: IntArray, origin: str) -> Hypothesis | None:
-        """``h`` refitted on ``members``, each by its most probable reading under ``h`` with
-        its posterior as weight."""
-        if len(members) < h.dof + 1:
+    fitted: dict[tuple[str, bytes], Hypothesis | None] = {}
+
+    def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None
+              ) -> Hypothesis | None:
+        """``h`` (or a ``kind`` fitted from scratch) refitted on ``members``, each by its most
+        probable reading under ``h`` with its posterior as weight; once per reading set."""
+        kind = kind or h.kind
+        if len(members) < MODELS[kind].dof + 1:
             return None
         best = scorer.best_reading(h)[members]
-        post = scorer.posterior(h)[best]
-        f = fit_readings(h.kind, readings, best, np.maximum(post, 0.05), start=h.fit)
-        return make(h.kind, f, members, best, origin)
+        key_ = (kind, best.tobytes())
+        if key_ not in fitted:
+            post = scorer.posterior(h)[best]
+            f = fit_readings(kind, readings, best, np.maximum(post, 0.05),
+                             start=h.fit if kind == h.kind else None, free_points=free)
+            fitted[key_] = make(kind, f, members, best, origin)
+        return fitted[key_]
 
     def grow(h: Hypothesis, rounds: int = 8) -> Hypothesis:
         """Every contact connected to ``h``'s members through contacts with a reading within
@@ -680,13 +696,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             mem = np.flatnonzero(assign == i)
             for k in kinds:  # the same contacts as every other type (BIC decides)
                 if k != h.kind and len(mem) >= MODELS[k].dof + 2:
-                    best = scorer.best_reading(h)[mem]
-                    f = fit_readings(k, readings, best)
-                    extra.append(make(k, f, mem, best, "other type"))
+                    extra.append(refit(h, mem, "other type", kind=k))
             for j in range(i + 1, len(chosen)):
-                g_ = chosen[j]
-                union = np.union1d(mem, np.flatnonzero(assign == j))
-                for hh in (h, g_):
+                other = np.flatnonzero(assign == j)
+                if not adj[np.ix_(mem, other)].any():
+                    continue  # not neighbours: no one surface through both
+                union = np.union1d(mem, other)
+                for hh in (h, chosen[j]):
                     u = refit(hh, union, "union")
                     if u is not None:
                         extra.append(grow(u))
@@ -708,6 +724,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         scorer.score(h)
     chosen = scorer.select(pool)
     history.append(scorer.total(chosen))
+    if diagnostics is not None:
+        diagnostics.update(pool=pool, scorer=scorer, chosen=chosen)
     assign = scorer.assign(chosen)
     reading = prior_best.copy()
     posterior = np.exp(readings.log_prior)
