@@ -38,8 +38,6 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
-import scipy.stats
 
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.data import FitData, Sweep
@@ -399,23 +397,19 @@ def _solve_robust(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delt
 
 def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, delta: float,
                 max_iter: int) -> _Solve:
-    """Levenberg-Marquardt (:mod:`wholearm_tools.fit.solve`), with IPOPT where LM cannot
-    finish: a solution on a bound or inequality constraint (IPOPT handles the active set), or
-    no convergence within ``max_iter`` (then IPOPT gets the same budget from where LM
-    stopped, and reports the status a caller checks)."""
+    """Levenberg-Marquardt (:mod:`wholearm_tools.fit.solve`); IPOPT only for a solution on a
+    bound or inequality constraint (IPOPT handles the active set)."""
     from wholearm_tools.fit import solve as lm
 
     res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_min, rho_np, _irls_weight)
-    if res.converged and np.all(np.isfinite(res.th)) and not lm.on_bound(m, res.th):
+    finite = bool(np.all(np.isfinite(res.th)))
+    if finite and not lm.on_bound(m, res.th):
         _, t, interior = _link_min(m, res.th, side, nd.a, nd.b)
-        return _Solve(res.th, t, interior, "Solve_Succeeded", True, res.iterations, res.cost)
-    start = res.th if np.all(np.isfinite(res.th)) else th0
-    if loss == "linear":
-        sol = _solve(m, nd, start, side, "linear", 1.0, max_iter)
-    else:
-        sol = _solve(m, nd, start, side, "linear", 1.0, max_iter)
-        if sol.success:
-            sol = _solve_robust(m, nd, sol, side, loss, delta, max_iter)
+        status = "Solve_Succeeded" if res.converged else "Maximum_Iterations_Exceeded"
+        return _Solve(res.th, t, interior, status, res.converged, res.iterations, res.cost)
+    sol = _solve(m, nd, res.th if finite else th0, side, "linear", 1.0, max_iter)
+    if sol.success and loss != "linear":
+        sol = _solve_robust(m, nd, sol, side, loss, delta, max_iter)
     sol.iterations += res.iterations
     return sol
 
@@ -465,6 +459,8 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
 @functools.lru_cache(maxsize=4096)
 def _t975(dof: int) -> float:
     """Two-sided 95 % quantile of Student's t with ``dof`` degrees of freedom."""
+    import scipy.stats  # (slow to import: only once a covariance is reported)
+
     return float(scipy.stats.t.ppf(0.975, dof))
 
 
@@ -941,12 +937,18 @@ def residuals(kind: str, params: dict[str, Any], data: FitData, free_side: float
               ) -> np.ndarray:
     """Residuals ``clearance - w`` (tips then links, metres) of ``data`` under a primitive given
     by its map.json parameters — the quantity the fit minimises."""
+    return residuals_and_touch(kind, params, data, free_side)[0]
+
+
+def residuals_and_touch(kind: str, params: dict[str, Any], data: FitData, free_side: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`residuals`, and where along each link (``t`` in [0, 1], ``(Nl,)``) it touches."""
     m = MODELS[kind]
     nd = _Norm(np.zeros(m.dim), 1.0, data.tip_points, data.tip_radius, data.tip_weight,
                data.link_a, data.link_b, data.link_radius, data.link_weight, data.free_points)
     th = _raw_from_params(m, params, nd)
-    rt, rl, _, _ = _residuals_norm(m, th, float(free_side), nd)
-    return np.concatenate([rt, rl])
+    rt, rl, t, _ = _residuals_norm(m, th, float(free_side), nd)
+    return np.concatenate([rt, rl]), t
 
 
 def cost(kind: str, params: dict[str, Any], data: FitData, free_side: float,

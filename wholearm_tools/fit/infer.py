@@ -36,12 +36,13 @@ import math
 from collections.abc import Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wholearm_tools.fit.core import fit_primitive, residuals
-from wholearm_tools.fit.data import FitData, Sweep
+from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
+from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import MODELS, InitContext
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings
@@ -50,11 +51,21 @@ from wholearm_tools.fit.result import FitResult
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+
+class SweptTest(Protocol):
+    """Where the robot has been over the run (free space)."""
+
+    resolution: float
+
+    def __call__(self, points: FloatArray) -> NDArray[np.bool_]: ...
+
 #: radius-like parameters of each curved type (checked against the policy's radius bounds)
 RADII = {"circle": ("radius",), "sphere": ("radius",), "cylinder": ("radius",),
          "torus": ("minor_radius", "major_radius")}
 #: closed types: free space inside means the robot, base included, is inside
 CLOSED = ("circle", "sphere")
+#: a side reading touching within this fraction of the link's length from its inner end
+_INNER_END = 1e-6
 #: candidate types per dimension, fewest parameters first
 DEFAULT_KINDS = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
 
@@ -182,11 +193,12 @@ class Scorer:
     """Residuals of every reading under a hypothesis, and the description length of a set."""
 
     def __init__(self, readings: Readings, policy: FitPolicy, sigma: float, extent: float,
-                 sweep: Sweep | None, base: FloatArray | None, B: float) -> None:
+                 swept: SweptTest | None, base: FloatArray | None, B: float) -> None:
         self.readings = readings
         self.policy = policy
         self.extent = extent
-        self.sweep = sweep
+        self.swept = swept
+        self.cell = 0.0 if swept is None else float(getattr(swept, "resolution", 0.0))
         self.base = base
         self.B = B
         self.all_data = readings.fit_data()
@@ -200,13 +212,24 @@ class Scorer:
                       + math.log(max(self.extent / (math.sqrt(2 * math.pi) * self.sigma),
                                      math.e)))
         self.c_in = -math.log(1.0 - p.outlier_prior)
-        self.model_unit = 0.5 * p.bic * math.log(max(self.n, 2))
+        # a parameter coded to the precision its contacts determine it: its range (the scene)
+        # over its standard deviation (sigma / sqrt(n_k)), plus the BIC share of the policy
+        self.param_cost = math.log(max(self.extent / self.sigma, math.e))
         self.sweep_tol = max(p.sweep_tol_sigmas * self.sigma, p.sweep_tol_min)
+        self.sweep_depth = self.sweep_tol + 0.5 * math.sqrt(self.readings.dim) * self.cell
 
     # ---- per hypothesis
     def residuals(self, h: Hypothesis) -> FloatArray:
+        """Residual of every reading under ``h``; infinite for a side reading whose least
+        clearance lies at the link's inner end.  That point is the joint the link turns about:
+        it does not move when the link turns, so a contact there would have stopped the inner
+        link, and the joint signals would have named it (the link in contact is the last one
+        to stop)."""
         if h.res is None:
-            r = residuals(h.kind, h.fit.params, self.all_data, h.fit.free_side)
+            r, t = residuals_and_touch(h.kind, h.fit.params, self.all_data, h.fit.free_side)
+            n_tip = self.all_data.n_tip
+            r = r.copy()
+            r[n_tip:][t <= _INNER_END] = np.inf
             h.res = self.readings.from_fit_rows(r)
         return h.res
 
@@ -261,7 +284,7 @@ class Scorer:
         if (self.base is not None and h.kind in CLOSED and h.fit.free_side < 0
                 and float(prim.signed_distance(self.base[None])[0]) > 0):
             return math.inf
-        if self.sweep is None or len(self.sweep) == 0 or len(h.members) == 0:
+        if self.swept is None or len(h.members) == 0:
             return 0.0
         feet = self.support_points(h)
         samples = [feet]
@@ -274,8 +297,10 @@ class Scorer:
                 samples.append(np.asarray(prim.closest_point(feet[i] + s * (feet[j] - feet[i]))))
         x = np.vstack(samples)
         normal = np.asarray(prim.gradient(x)) * h.fit.free_side
-        inside = x - self.sweep_tol * normal  # just behind the surface, in its material
-        return float(np.count_nonzero(_in_sweep(self.sweep, inside)))
+        # a point that deep behind the surface (in its material) lies in a cell whose centre
+        # is at least ``sweep_tol`` behind it; the map calls a cell swept only when its centre
+        # was inside the robot
+        return float(np.count_nonzero(self.swept(x - self.sweep_depth * normal)))
 
     # ---- sets
     def total(self, chosen: Sequence[Hypothesis]) -> float:
@@ -287,10 +312,19 @@ class Scorer:
         return float(np.sum(cur)) + extra
 
     def model_cost(self, h: Hypothesis) -> float:
-        """BIC and the free-space term: each sample of the hypothesis' support that the sweep
-        cuts is evidence against it as strong as a contact's for it (the cost of leaving a
-        contact unexplained)."""
-        return h.dof * self.model_unit + h.free * self.c_out
+        """The primitive's own code length and its free-space term.
+
+        Each parameter is coded to the precision its ``n_k`` contacts determine it, ``sigma /
+        sqrt(n_k)`` over a range of the scene's size: ``log(L / sigma) + bic / 2 log(n_k)``
+        nats (two-part MDL; the second term alone is BIC, which undercharges a primitive
+        fitted to few contacts: five parameters would then cost less than two contacts
+        explained).  So a primitive pays for itself only by explaining clearly more contacts
+        than it has parameters.  Each sample of its support that the sweep cuts is evidence
+        against it as strong as a contact's for it (the cost of leaving a contact
+        unexplained)."""
+        n_k = max(len(h.members), 2)
+        return (h.dof * (self.param_cost + 0.5 * self.policy.bic * math.log(n_k))
+                + h.free * self.c_out)
 
     def select(self, pool: Sequence[Hypothesis], start: Sequence[Hypothesis] = ()
                ) -> list[Hypothesis]:
@@ -354,26 +388,6 @@ class Scorer:
         return np.where(C[k, np.arange(self.n)] < self.c_out, k, -1).astype(np.int64)
 
 
-def _in_sweep(sweep: Sweep, points: FloatArray) -> NDArray[np.bool_]:
-    """Whether each point lies inside one of the sweep's capsules."""
-    out = np.zeros(len(points), dtype=bool)
-    if len(points) == 0:
-        return out
-    hits = sweep._tree.query_ball_point(points, sweep._reach)
-    pi = np.repeat(np.arange(len(points)), [len(h) for h in hits])
-    if pi.size == 0:
-        return out
-    ci = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])
-    a, b, r = sweep.a[ci], sweep.b[ci], sweep.radius[ci]
-    d = b - a
-    p = points[pi]
-    L2 = np.einsum("ij,ij->i", d, d)
-    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(L2, 1e-300), 0.0, 1.0)
-    dist = np.linalg.norm(p - a - t[:, None] * d, axis=1)
-    np.logical_or.at(out, pi, dist < r)
-    return out
-
-
 # --------------------------------------------------------------------------- proposals
 
 
@@ -395,6 +409,10 @@ class _Context:
     key: int
     free: FloatArray            # (K, d) free-space points (robot positions)
     max_iter: int               # solver iterations of a seed fit
+    accept: float = math.inf    # a seed fit poorer than this many sigmas is trimmed
+    sigma_id: float = 0.0       # kinematic error the proposals are judged determined at
+    max_rel_std: float = math.inf
+    extend: int = 12            # contacts an undetermined seed may try, one at a time
 
 
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
@@ -460,10 +478,11 @@ def _guess_residuals(kind: str, side: float, th: FloatArray, nd: object, data: F
 
 
 def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
-    """Hypotheses at one seed contact, per type: a fit to its ``dof + 2`` nearest contacts (each
-    by its most probable reading), and the consensus of minimal sets of readings among its
-    ``dof + 2 + seed_extra`` nearest (RANSAC: near the edge of a surface the nearest contacts
-    mix two), fitted on the consensus readings.  Types with more than five parameters (cone,
+    """Hypotheses at one seed contact, per type, from its ``dof + 2 + seed_extra`` nearest
+    contacts: all of them by their most probable readings, and the consensus of minimal sets of
+    them (RANSAC on algebraic guesses: near the edge of a surface the nearest contacts mix two);
+    each fitted and polished (:func:`_polish`), and extended where not determined
+    (:func:`_extend`).  Types with more than five parameters (cone,
     torus) are not seeded: on a seed's few contacts they fit almost any patch and their guesses
     are the slowest; they are offered as refits of the contacts of selected primitives, where
     there are enough to tell them from the simpler types (:func:`infer`)."""
@@ -474,14 +493,16 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         m = MODELS[kind]
         if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
             continue
-        plain = np.sort(ctx.order[anchor, :m.dof + 2])
-        if len(plain) < m.dof + 2:
-            continue
-        f = fit_readings(kind, rd, ctx.prior_best[plain], free_points=ctx.free,
-                         max_iter=ctx.max_iter)
-        if _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
-            out.append((kind, plain, ctx.prior_best[plain], f))
         near = ctx.order[anchor, :m.dof + 2 + ctx.seed_extra]
+        if len(near) < m.dof + 2:
+            continue
+        # the whole neighbourhood by its prior readings, fitted and polished
+        start = np.sort(near)
+        f = fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
+                         max_iter=ctx.max_iter)
+        polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
+        if polished is not None:
+            out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
         sel = np.flatnonzero(np.isin(rd.contact, near))
         data_sel = rd.fit_data(sel)
         pos_sel = Readings.fit_order(rd.sphere[sel])
@@ -504,22 +525,108 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         if best is None or len(best[0]) < m.dof + 2:
             continue
         inl, r = best
+        members = np.sort(inl)
         reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
-                            for c in np.sort(inl)])
+                            for c in members])
         f = fit_readings(kind, rd, reading, free_points=ctx.free, max_iter=ctx.max_iter)
-        if not _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
+        polished = _polish(kind, rd, members, reading, f, anchor, ctx)
+        if polished is None:
             continue
-        out.append((kind, np.sort(inl), reading, f))
+        out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
     return out
 
 
+def _extended(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: FitResult,
+              anchor: int, ctx: _Context) -> tuple[IntArray, IntArray, FitResult]:
+    """:func:`_extend` where the seed's fit is not determined and the noise level is known."""
+    if math.isfinite(ctx.accept) and f.sensitivity * ctx.sigma_id > ctx.max_rel_std:
+        return _extend(kind, rd, members, reading, f, anchor, ctx)
+    return members, reading, f
+
+
+def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: FitResult,
+            anchor: int, ctx: _Context) -> tuple[IntArray, IntArray, FitResult]:
+    """A seed fit its contacts do not determine, extended by the next nearest contacts one at a
+    time, each refitted from the last solution and kept while the fit stays within 1.5 noise
+    sigmas (dof-corrected), until it is determined.
+
+    Link contacts from one joint's sweep all lie tangent to a family of primitives (every
+    tangent line in one plane touches a whole family of cylinders); a fresh fit to a larger
+    neighbourhood falls into another member of the family or another minimum, while a refit
+    from the last solution slides along the family to the member the new contact touches too."""
+    for c in ctx.order[anchor, len(members):len(members) + ctx.extend]:
+        if c in members:
+            continue
+        rows = np.flatnonzero(rd.contact == c)
+        res = np.abs(_residuals_of(f, rd, rows))
+        r_best = int(rows[int(np.argmin(res))])
+        cand = np.sort(np.append(members, c))
+        cand_reading = np.array([r_best if m_ == c else int(reading[members == m_][0])
+                                 for m_ in cand])
+        g = fit_readings(kind, rd, cand_reading, start=f, free_points=ctx.free,
+                         max_iter=ctx.max_iter)
+        if g and _admissible(kind, g, ctx.min_radius, ctx.max_radius_ratio) \
+                and _rms_dof(g) <= 1.5 * ctx.sigma:
+            members, reading, f = cand, cand_reading, g
+            if f.sensitivity * ctx.sigma_id <= ctx.max_rel_std:
+                break
+    return members, reading, f
+
+
+def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: FitResult,
+            anchor: int, ctx: _Context, rounds: int = 12
+            ) -> tuple[IntArray, IntArray, FitResult] | None:
+    """A consensus fit refined by alternation: each member takes its reading closest to the
+    current fit, members farther than ``3.5`` robust sigmas of the fit's own residuals (the
+    seed does not know the noise level yet; at least the run's floor) are let go, and the
+    rest are refitted from the current solution; until nothing changes.  Once the noise level is
+    known (``ctx.accept`` finite), a fit poorer than ``accept`` sigmas then loses its worst
+    member, one at a time, down to ``dof + 2``.  The algebraic guess
+    that chose the readings is millimetres off, so where a contact's sphere and side readings
+    are both within its tolerance the first choice is often the wrong one."""
+    m = MODELS[kind]
+    for _ in range(rounds):
+        if not _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
+            return None
+        rows = np.flatnonzero(np.isin(rd.contact, members))
+        res = np.abs(_residuals_of(f, rd, rows))
+        best = np.full(rd.n_contacts, np.inf)
+        np.minimum.at(best, rd.contact[rows], res)
+        choice = np.array([int(rows[rd.contact[rows] == c][np.argmin(res[rd.contact[rows] == c])])
+                           for c in members])
+        scale = max(1.4826 * float(np.median(best[members])), ctx.sigma)
+        keep = members[(best[members] <= 3.5 * scale) | (members == anchor)]
+        keep_reading = choice[np.isin(members, keep)]
+        if len(keep) < m.dof + 2:
+            return None
+        if np.array_equal(keep, members) and np.array_equal(keep_reading, reading):
+            if not _rms_dof(f) > ctx.accept * ctx.sigma or len(members) <= m.dof + 2:
+                return members, reading, f
+            # the fit is poor at the noise level: its worst member goes (never the anchor)
+            worst = np.where(members == anchor, -1.0, best[members])
+            keep = np.delete(members, int(np.argmax(worst)))
+            keep_reading = choice[np.isin(members, keep)]
+        members, reading = keep, keep_reading
+        g = fit_readings(kind, rd, reading, start=f, free_points=ctx.free, max_iter=ctx.max_iter)
+        if not g:
+            return None
+        f = g
+    return (members, reading, f) if _admissible(kind, f, ctx.min_radius,
+                                                  ctx.max_radius_ratio) else None
+
+
+def _residuals_of(f: FitResult, rd: Readings, rows: IntArray) -> FloatArray:
+    """Residuals [m] of readings ``rows`` under fit ``f`` (in the order of ``rows``)."""
+    r = residuals_and_touch(f.kind, f.params, rd.fit_data(rows), f.free_side)[0]
+    return r[Readings.fit_order(rd.sphere[rows])]
+
+
 def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
-               ) -> list[tuple[str, IntArray, IntArray, FitResult]]:
+               ) -> list[list[tuple[str, IntArray, IntArray, FitResult]]]:
+    """:func:`_seed` at each anchor (in worker processes when given an executor)."""
     if executor is None or len(anchors) < 2:
-        res = [_seed(ctx, a) for a in anchors]
-    else:
-        res = list(executor.map(_seed, [ctx] * len(anchors), anchors))
-    return [h for hs in res for h in hs]
+        return [_seed(ctx, a) for a in anchors]
+    return list(executor.map(_seed, [ctx] * len(anchors), anchors))
 
 
 # --------------------------------------------------------------------------- the loop
@@ -527,8 +634,10 @@ def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
 
 def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
           policy: FitPolicy | None = None, B: float = 0.02, noise_floor: float = 0.0,
-          sweep: Sweep | None = None, base: ArrayLike | None = None,
-          free_points: ArrayLike | None = None, rng: int | np.random.Generator | None = 0, executor: Executor | None = None,
+          swept: SweptTest | None = None, base: ArrayLike | None = None,
+          free_points: ArrayLike | None = None, reach: float | None = None,
+          rng: int | np.random.Generator | None = 0,
+          executor: Executor | None = None,
           diagnostics: dict | None = None) -> Inference:
     """Describe ``readings`` by primitives: the loop of the module docstring.
 
@@ -539,8 +648,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     policy : :class:`FitPolicy`
     B : smallest expected curvature radius [m] (radius floor, support sampling step)
     noise_floor : smallest noise level [m] (the encoder resolution at the contacts)
-    sweep : the robot's capsules over the run (free space); base : the robot's base point
+    swept : where the robot has been: ``swept(points (K, d)) -> (K,) bool`` (free space), with
+        a ``resolution`` attribute (its cell size, 0 when exact); base : the robot's base point
     free_points : (K, d) points the robot occupied (free space; a fit's free side)
+    reach : the robot's reach [m]: kinematic errors scale with it (the scene size without one)
     rng : seeds the proposals; the result depends on nothing else (not on ``executor``)
     executor : runs the seed proposals (e.g. a process pool)
     diagnostics : a dict that receives the hypothesis pool and the scorer (for study)
@@ -577,14 +688,21 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             else np.asarray(free_points, dtype=float).reshape(-1, dim))
     floor = max(float(noise_floor), 1e-6 * extent)
     sigma = float(policy.noise) if policy.noise else floor
-    min_radius = policy.min_radius_B * B
-    scorer = Scorer(readings, policy, sigma, extent, sweep, base_pt, B)
+    min_radius = policy.min_radius_over_b * B
+    scorer = Scorer(readings, policy, sigma, extent, swept, base_pt, B)
     key = int(rng.integers(2**63))
 
-    def context(sig: float) -> _Context:
-        return _Context(readings, kinds, rep, prior_best, order, sig, max(30.0 * sig, 1e-3 * extent),
+    def sigma_id(sig: float) -> float:
+        """The kinematic error a proposal is judged determined at (as the report gate)."""
+        return max(sig, policy.kinematic_error * (reach or extent))
+
+    def context(sig: float, known: bool) -> _Context:
+        return _Context(readings, kinds, rep, prior_best, order, sig,
+                        max(30.0 * sig, 1e-3 * extent),
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
-                        policy.consensus_trials, key, free, 30)
+                        policy.consensus_trials, key, free, 30,
+                        policy.seed_accept if known else math.inf, sigma_id(sig),
+                        policy.max_rel_std, policy.seed_extend)
 
     def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
              origin: str) -> Hypothesis | None:
@@ -637,6 +755,19 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     pool: list[Hypothesis] = []
 
+    def grow_new(hs: Sequence[Hypothesis | None]) -> list[Hypothesis]:
+        """Each new hypothesis grown, unless the pool (or one grown before it) already holds
+        one of its type that explains all of its contacts (it would grow into that one)."""
+        out: list[Hypothesis] = []
+        for h in hs:
+            if h is None:
+                continue
+            if any(g.kind == h.kind and np.all(scorer.score(g).cost[h.members] < scorer.c_out)
+                   for g in (*pool, *out)):
+                continue
+            out.append(grow(h))
+        return out
+
     def add(hs: Sequence[Hypothesis | None]) -> None:
         seen = {(h.kind, h.members.tobytes(), h.reading.tobytes()) for h in pool}
         for h in hs:
@@ -649,22 +780,29 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     # ---- first seeds: the noise level from the best seeds, then consensus seeds
     anchors = _farthest(rep, policy.max_seeds, rng)
-    raw = _seed_many(context(sigma), anchors, executor)
-    if policy.noise is None and raw:
-        best = np.array([_rms_dof(f) for _, _, _, f in raw])
+    per_anchor = _seed_many(context(sigma, policy.noise is not None), anchors, executor)
+    if policy.noise is None:
+        best = np.array([min((_rms_dof(f) for *_, f in hs), default=np.inf)
+                         for hs in per_anchor])
         best = best[np.isfinite(best)]
         if best.size:
-            # a seed inside one surface fits at the noise level: the lower decile of the seed
-            # RMS (dof-corrected, dof + 2 + extra contacts) estimates it; mixed seeds fit worse
+            # a seed inside one surface fits at the noise level: the lower decile of the
+            # seeds' best RMS (dof-corrected) estimates it; seeds that mix surfaces fit worse
             sigma = max(float(np.percentile(best, 10)), floor)
             scorer.set_sigma(sigma)
-    seeds = [make(k, f, mem, rd, "seed") for k, mem, rd, f in raw]
-    add([grow(h) for h in seeds if h is not None])
+        # seeds that fit poorly at that level are tried again, trimmed to it
+        redo = [i for i, hs in enumerate(per_anchor)
+                if not any(_rms_dof(f) <= policy.seed_accept * sigma for *_, f in hs)]
+        again = _seed_many(context(sigma, True), [anchors[i] for i in redo], executor)
+        for i, hs in zip(redo, again, strict=True):
+            per_anchor[i] = per_anchor[i] + hs
+    add(grow_new([make(k, f, mem, rd_, "seed") for hs in per_anchor
+                  for k, mem, rd_, f in hs]))
 
     history: list[float] = []
     chosen: list[Hypothesis] = []
     messages: list[str] = []
-    for round_ in range(policy.rounds):
+    for _ in range(policy.rounds):
         for _ in range(policy.em_rounds):
             for h in pool:
                 scorer.score(h)
@@ -702,20 +840,26 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 if not adj[np.ix_(mem, other)].any():
                     continue  # not neighbours: no one surface through both
                 union = np.union1d(mem, other)
+                # the union as each of the pair's types (warm) and as any richer type: two
+                # patches of one surface (the tangent planes of a post touched from two sides)
                 for hh in (h, chosen[j]):
                     u = refit(hh, union, "union")
                     if u is not None:
                         extra.append(grow(u))
+                richer = max(h.dof, chosen[j].dof)
+                for k in kinds:
+                    if k not in (h.kind, chosen[j].kind) and MODELS[k].dof > richer:
+                        u = refit(h, union, "union", kind=k)
+                        if u is not None:
+                            extra.append(grow(u))
         left = np.flatnonzero(assign < 0)
-        if len(left) >= min_need:
-            ctx = context(scorer.sigma)
-            ctx = replace(ctx, order=_restricted_order(order, left))
-            picks = [int(left[i]) for i in _farthest(rep[left], max(policy.max_seeds // 2, 1),
-                                                      rng)]
-            for k, mem, rd_, f in _seed_many(ctx, picks, executor):
-                h = make(k, f, mem, rd_, "seed")
-                if h is not None:
-                    extra.append(grow(h))
+        n_seeds = min(policy.max_seeds // 2, len(left) // min_need)
+        if n_seeds >= 1:
+            ctx = replace(context(scorer.sigma, True), order=_restricted_order(order, left))
+            picks = [int(left[i]) for i in _farthest(rep[left], n_seeds, rng)]
+            extra.extend(grow_new([make(k, f, mem, rd_, "seed")
+                                   for hs in _seed_many(ctx, picks, executor)
+                                   for k, mem, rd_, f in hs]))
         n_before = len(pool)
         add(extra)
         if len(pool) == n_before:

@@ -35,6 +35,10 @@ class FitPolicy:
     max_seeds : seed contacts per round (farthest-point sampled).
     seed_extra : a seed's neighbourhood is its ``dof + 2 + seed_extra`` nearest contacts, cut
         to the consensus of ``consensus_trials`` random minimal sets (RANSAC).
+    seed_accept : once the noise level is estimated, a seed whose fit is poorer than this many
+        sigmas (dof-corrected RMS) loses its worst contact, one at a time.
+    seed_extend : a seed fit its contacts do not determine (by the report gate's measure) tries
+        up to this many further nearest contacts, one at a time.
     rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
     em_rounds : most assign -> refit -> select iterations.
     neighbours : contacts per contact in the growth graph.
@@ -59,7 +63,7 @@ class FitPolicy:
 
     Types
     -----
-    min_radius_B : the smallest admissible radius of a curved primitive, in units of B (the
+    min_radius_over_b : the smallest admissible radius of a curved primitive, in units of B (the
         smallest expected curvature radius).
     max_radius_ratio : the largest, in units of the support's RMS spread.
     """
@@ -71,6 +75,8 @@ class FitPolicy:
     sweep_tol_min: float = 2e-3
     max_seeds: int = 16
     seed_extra: int = 6
+    seed_accept: float = 2.5
+    seed_extend: int = 12
     consensus_trials: int = 24
     rounds: int = 3
     em_rounds: int = 6
@@ -79,7 +85,7 @@ class FitPolicy:
     kinematic_error: float = 5e-4
     max_rel_std: float = 0.2
     max_influence: float = 0.95
-    min_radius_B: float = 0.5
+    min_radius_over_b: float = 0.5
     max_radius_ratio: float = 50.0
 
     def __post_init__(self) -> None:
