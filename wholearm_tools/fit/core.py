@@ -247,6 +247,17 @@ def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np
     return clearance(a + t[:, None] * d), t
 
 
+def _link_t(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Least clearance along each link and its t: closed form where the type has one (then
+    ``True``), else the sampled and bracketed numeric minimum (``False``)."""
+    exact = _closed_form_min(m, th, side, a, b)
+    if exact is not None:
+        return exact[0], exact[1], True
+    val, t = segment_min_numeric(lambda p: side * signed_distance_np(m, th, p), a, b)
+    return val, t, False
+
+
 def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least clearance along each link: value, t and whether t is a smooth interior minimum
@@ -256,9 +267,8 @@ def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarra
 
     def fn(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
-    exact = _closed_form_min(m, th, side, a, b)
-    val, t = exact if exact is not None else segment_min_numeric(fn, a, b)
-    if m.linear or len(a) == 0:
+    val, t, _ = _link_t(m, th, side, a, b)
+    if m.linear:
         return val, t, np.zeros(len(a), dtype=bool)
     h = 1e-3
     tl, tr = np.clip(t - h, 0, 1), np.clip(t + h, 0, 1)
@@ -405,10 +415,11 @@ def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, de
     stopped, and reports the status a caller checks)."""
     from wholearm_tools.fit import solve as lm
 
-    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_min, rho_np, _irls_weight)
+    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_t, rho_np, _irls_weight)
     if res.converged and np.all(np.isfinite(res.th)) and not lm.on_bound(m, res.th):
-        _, t, interior = _link_min(m, res.th, side, nd.a, nd.b)
-        return _Solve(res.th, t, interior, "Solve_Succeeded", True, res.iterations, res.cost)
+        interior = (res.t > _T_EDGE) & (res.t < 1 - _T_EDGE)
+        return _Solve(res.th, res.t, interior, "Solve_Succeeded", True, res.iterations,
+                      res.cost)
     start = res.th if np.all(np.isfinite(res.th)) else th0
     if loss == "linear":
         sol = _solve(m, nd, start, side, "linear", 1.0, max_iter)
@@ -526,6 +537,9 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
     """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
     link axes, which are in free space) all lie clearly on one side of the initial guess;
     otherwise both, and :func:`_pick_side` decides on the fitted surfaces."""
+    no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
+    if no_radius and len(nd.free) == 0:
+        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
     ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
     cands = [c for c in m.init(ctx) if np.all(np.isfinite(c))]
     if not cands:
@@ -538,9 +552,6 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
         if out + inn == len(pts) and (out == 0 or inn == 0):
             return [1.0 if out else -1.0]
         break
-    no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
-    if no_radius and len(nd.free) == 0:
-        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
     return [1.0, -1.0]
 
 
@@ -715,6 +726,7 @@ def fit_primitive(
     initial: dict[str, Any] | None = None,
     max_iter: int = 200,
     good_rms: float | None = None,
+    covariance: bool = True,
 ) -> FitResult:
     """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
 
@@ -743,12 +755,17 @@ def fit_primitive(
         Initial map.json parameters; default algebraic guesses (several starts for
         cylinders, cones and tori).
     max_iter : int
-        IPOPT iteration limit per solve.
+        Iteration limit per solve (Levenberg-Marquardt, and IPOPT where it takes over).
     good_rms : float or None
         An RMS residual [m] (dof-corrected) the caller would accept.  With a short
         ``max_iter``, when no converged start reaches it, the lowest-cost start the limit cut
         off is let finish (up to 200 iterations): a wrong basin converges fast, the right one
         may not (seven link contacts on a post).  None: starts are not finished.
+    covariance : bool
+        Compute the parameter covariance, the 95 % intervals and the sensitivity (the
+        Gauss-Newton information at the optimum).  False skips them for fits whose
+        uncertainty nobody reads (proposals that do not reach selection): ``covariance`` is
+        then None, ``ci95`` empty and ``sensitivity`` NaN.
 
     Returns
     -------
@@ -841,6 +858,7 @@ def fit_primitive(
         return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
     side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
+                        covariance=covariance,
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
                         and len(nd.free) + len(nd.a) == 0)
@@ -877,7 +895,8 @@ def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
 
 
 def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
-                 delta: float, labels: tuple[str, ...], ambiguous: bool) -> FitResult:
+                 delta: float, labels: tuple[str, ...], ambiguous: bool,
+                 covariance: bool = True) -> FitResult:
     th = sol.th.copy()
     if m.linear and side < 0:  # report lines and planes with the normal towards free space
         th[: m.dim] *= -1.0
@@ -887,8 +906,12 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     rt_m, rl_m = rt * nd.scale, rl * nd.scale
     params = _denormalise(m, m.to_params(th), nd)
     # covariance (normalised raw) -> map params -> metres
-    cov_raw, sens = (_covariance_norm(m, nd, sol, side, loss, delta) if sol.success
-                     else (None, math.inf))
+    if not covariance:
+        cov_raw, sens = None, math.nan
+    elif sol.success:
+        cov_raw, sens = _covariance_norm(m, nd, sol, side, loss, delta)
+    else:
+        cov_raw, sens = None, math.inf
     cov = ci = None
     ci95: dict[str, tuple[Any, Any]] = {}
     if cov_raw is not None:
