@@ -434,10 +434,11 @@ def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, de
 # --------------------------------------------------------------------------- covariance
 
 
-def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float
-                     ) -> tuple[np.ndarray, float]:
+def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float,
+                     outliers: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Covariance of the raw parameters (normalised units; NaN when not determined) and the
-    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale)."""
+    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale).
+    Contacts flagged in ``outliers`` (read as outliers by a robust fit) do not count."""
     from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
     nt, nl = len(nd.tip), len(nd.a)
@@ -458,9 +459,12 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
     lam_min = float(lam[0]) if lam.size else 0.0
     sens = 1.0 / math.sqrt(lam_min) if lam_min > 0 else math.inf
     nan = np.full((m.n_raw, m.n_raw), np.nan)
+    w_rob = _irls_weight(z, loss, delta)
+    if outliers is not None:
+        w_rob = np.where(outliers, 0.0, w_rob)
+        n -= int(np.count_nonzero(outliers))
     if n <= m.dof:
         return nan, sens
-    w_rob = _irls_weight(z, loss, delta)
     H = Jm.T @ (w_rob[:, None] * Jm)
     s2 = float(np.sum(w_rob * z * z) / (n - m.dof))
     try:
@@ -745,15 +749,19 @@ def fit_primitive(
         ``initial`` line or plane is taken with its normal towards free space).
     loss : "linear", "huber" or "cauchy"
         Robust losses are smooth: pseudo-Huber ``d^2 (sqrt(1 + (z/d)^2) - 1)`` and Cauchy
-        ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.
+        ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.  With no
+        ``initial``, a robust fit starts from a consensus of minimal contact sets and reads
+        the contacts beyond 2.5 noise levels of it as outliers, which then count at that
+        fixed cost instead of pulling (:func:`wholearm_tools.fit.robust.robust_fit`).
     loss_scale : float
         ``d`` in units of ``noise``.
     noise : float or None
-        Residual noise level sigma in metres (used by robust losses); None estimates it from a
-        linear fit (1.4826 x median absolute weighted residual).
+        Residual noise level sigma in metres (used by robust losses); None estimates it: with
+        ``initial``, from a linear fit (1.4826 x median absolute weighted residual); without,
+        on the consensus inliers.
     initial : dict or None
         Initial map.json parameters; default algebraic guesses (several starts for
-        cylinders, cones and tori).
+        cylinders, cones and tori), or the consensus start for a robust loss.
     max_iter : int
         Iteration limit per solve (Levenberg-Marquardt, and IPOPT where it takes over).
     good_rms : float or None
@@ -825,7 +833,23 @@ def fit_primitive(
         sides = _decide_side(m, nd)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
+    outliers: dict[float, np.ndarray] = {}
     for side in sides:
+        if loss != "linear" and initial is None:
+            # no start: a consensus of minimal sets gives the inliers, their least-squares
+            # fit starts the robust loss, their noise sets its scale (fit.robust)
+            from wholearm_tools.fit.robust import robust_fit
+
+            # (a fixed stream: the fit is a function of its data)
+            rf = robust_fit(m, nd, side, loss, loss_scale, noise / nd.scale if noise else None,
+                            np.random.default_rng(0), max_iter)
+            if rf is not None:
+                t = _link_t(m, rf.th, side, nd.a, nd.b)[1] if len(nd.a) else np.zeros(0)
+                fits[side] = _Solve(rf.th, t, (t > _T_EDGE) & (t < 1 - _T_EDGE), rf.status,
+                                    rf.success, rf.iterations, rf.cost)
+                deltas[side] = rf.delta
+                outliers[side] = ~rf.inliers
+                continue
         ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
         cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
         cands = [c for c in cands if np.all(np.isfinite(c))]
@@ -858,7 +882,7 @@ def fit_primitive(
         return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
     side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
-                        covariance=covariance,
+                        covariance=covariance, outliers=outliers.get(side),
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
                         and len(nd.free) + len(nd.a) == 0)
@@ -896,7 +920,7 @@ def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
 
 def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
                  delta: float, labels: tuple[str, ...], ambiguous: bool,
-                 covariance: bool = True) -> FitResult:
+                 covariance: bool = True, outliers: np.ndarray | None = None) -> FitResult:
     th = sol.th.copy()
     if m.linear and side < 0:  # report lines and planes with the normal towards free space
         th[: m.dim] *= -1.0
@@ -909,7 +933,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     if not covariance:
         cov_raw, sens = None, math.nan
     elif sol.success:
-        cov_raw, sens = _covariance_norm(m, nd, sol, side, loss, delta)
+        cov_raw, sens = _covariance_norm(m, nd, sol, side, loss, delta, outliers)
     else:
         cov_raw, sens = None, math.inf
     cov = ci = None
@@ -919,7 +943,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
         _, roles = _labels(m)
         D = np.where(roles < 0, nd.scale, 1.0)
         cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
-        n = data.n_contacts
+        n = data.n_contacts - (0 if outliers is None else int(np.count_nonzero(outliers)))
         q = _t975(n - m.dof) if n > m.dof else np.nan
         sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
         k = 0
@@ -951,6 +975,9 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     if ambiguous and sol.success:
         msg += ("; free side not determined by the data (no free-space hints): assumed the "
                 "base-frame origin is in free space")
+    if outliers is not None and np.any(outliers):
+        msg += (f"; {int(np.count_nonzero(outliers))} of {len(outliers)} contacts read as "
+                "outliers of the consensus")
     return FitResult(
         kind=m.kind, success=sol.success, message=msg + note, status=sol.status,
         iterations=sol.iterations, cost=cost, params=params, free_side=float(side),
