@@ -183,26 +183,41 @@ class _Norm:
 
 
 def _normalise(data: FitData) -> _Norm | None:
-    pts = np.vstack([data.tip_points, data.link_a, data.link_b])
-    mu = pts.mean(axis=0)
-    scale = float(np.sqrt(np.mean(np.sum((pts - mu) ** 2, axis=1))))
+    nt, nl = data.n_tip, data.n_link
+    c = np.vstack([data.tip_points, data.link_a, data.link_b])
+    n = len(c)
+    # sums as matrix products: a reduction down the long axis of an (N, d) array costs
+    # more than the rest of a small fit
+    mu = (np.ones(n) @ c) / n
+    c -= mu
+    flat = c.ravel()
+    scale = float(np.sqrt((flat @ flat) / n))
     if not scale > 1e-12 * (1.0 + float(np.abs(mu).max())):
         return None
+    c /= scale
     W = np.concatenate([data.tip_weight, data.link_weight])
     wm = float(W.mean())
     return _Norm(
-        mu, scale, (data.tip_points - mu) / scale, data.tip_radius / scale,
-        data.tip_weight / wm, (data.link_a - mu) / scale, (data.link_b - mu) / scale,
-        data.link_radius / scale, data.link_weight / wm, (data.free_points - mu) / scale,
+        mu, scale, c[:nt], data.tip_radius / scale, data.tip_weight / wm, c[nt:nt + nl],
+        c[nt + nl:], data.link_radius / scale, data.link_weight / wm,
+        (data.free_points - mu) / scale,
     )
 
 
 def _rank(points: np.ndarray) -> int:
-    c = points - points.mean(axis=0)
-    s = np.linalg.svd(c, compute_uv=False)
-    if s.size == 0 or s[0] <= 0:
+    """Rank of the centred point cloud: singular values above ``1e-7`` of the largest, from
+    the eigenvalues of the ``d x d`` scatter matrix (their rounding, ``~1e-8`` of the spread
+    after the square root, is below the threshold; an SVD of the ``(N, d)`` cloud costs
+    more than the rest of a small fit)."""
+    n = len(points)
+    if n == 0:
         return 0
-    return int(np.sum(s > 1e-7 * s[0]))
+    c = points - (np.ones(n) @ points) / n
+    ev = np.linalg.eigvalsh(c.T @ c)
+    s = np.sqrt(np.maximum(ev, 0.0))
+    if s.size == 0 or s[-1] <= 0:
+        return 0
+    return int(np.sum(s > 1e-7 * s[-1]))
 
 
 # --------------------------------------------------------------------------- numeric residuals
@@ -853,7 +868,8 @@ def fit_primitive(
         ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
         cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
         cands = [c for c in cands if np.all(np.isfinite(c))]
-        scored = sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0))
+        scored = (cands if len(cands) < 2 else
+                  sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0)))
         def consider(sol: _Solve, side: float = side) -> None:
             delta = loss_scale * (noise / nd.scale if noise else 1.0)
             if loss != "linear" and sol.success:
