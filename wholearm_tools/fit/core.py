@@ -186,12 +186,12 @@ def _normalise(data: FitData) -> _Norm | None:
     nt, nl = data.n_tip, data.n_link
     c = np.vstack([data.tip_points, data.link_a, data.link_b])
     n = len(c)
-    # sums as matrix products: a reduction down the long axis of an (N, d) array costs
-    # more than the rest of a small fit
+    # the column sums as a matrix product: numpy's reduction down the long axis of an
+    # (N, d) array costs more than the rest of a small fit; the sum of squares by einsum (a
+    # BLAS dot of more than ~10^4 numbers starts threads that spin on a loaded machine)
     mu = (np.ones(n) @ c) / n
     c -= mu
-    flat = c.ravel()
-    scale = float(np.sqrt((flat @ flat) / n))
+    scale = float(np.sqrt(np.einsum("ij,ij->", c, c) / n))
     if not scale > 1e-12 * (1.0 + float(np.abs(mu).max())):
         return None
     c /= scale
