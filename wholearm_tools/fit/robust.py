@@ -17,7 +17,8 @@ So :func:`consensus_start`
    and up to half the contacts may be outliers), and stops sampling once a clean set has been
    drawn with probability :data:`CONFIDENCE` given the inlier share seen so far, and not before
    :data:`MIN_TRIALS` sets (the share is measured at the best hypothesis's own scale, which a
-   wrong hypothesis inflates);
+   wrong hypothesis inflates); when there are no more than :data:`MIN_TRIALS` sets, each is
+   tried once;
 3. takes as inliers the contacts within :data:`CUTOFF` robust standard deviations of the best
    hypothesis, the scale being the least-median one (``1.4826 (1 + 5 / (n - dof))`` times the
    score, Rousseeuw and Leroy 1987), so the tolerance comes from the data;
@@ -33,6 +34,7 @@ in the fit.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -115,11 +117,17 @@ def consensus_start(m: Model, nd: Any, side: float, rng: np.random.Generator,
     h = (n + p + 1) // 2
     correction = 1.4826 * (1.0 + 5.0 / (n - p))
     best_score, best_th = math.inf, None
+    # few contacts: every set once, in order (random draws would repeat sets)
+    every = (iter(itertools.combinations(range(n), size))
+             if math.comb(n, size) <= MIN_TRIALS else None)
     needed, trials = MAX_TRIALS, 0
     while trials < max(MIN_TRIALS, min(needed, MAX_TRIALS)):
+        chosen = next(every, None) if every is not None else rng.choice(n, size, replace=False)
+        if chosen is None:
+            break
         trials += 1
         pick = np.zeros(n, dtype=bool)
-        pick[rng.choice(n, size, replace=False)] = True
+        pick[list(chosen)] = True
         for th in _guesses(m, _context(_take(nd, pick), side)):
             z = _abs_z(m, th, side, nd)
             score = float(np.partition(z, h - 1)[h - 1])
