@@ -327,7 +327,7 @@ def main() -> None:
     ap.add_argument("--section", choices=("speed", "robust", "all"), default="all")
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=KINDS)
     ap.add_argument("--sizes", nargs="+", type=int, default=list(SIZES))
-    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--repeats", type=int, default=9)
     ap.add_argument("--scipy-method", default="trf", choices=("trf", "dogbox", "lm"))
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--ransac-thresh", type=float, default=1e-3, help="metres")
