@@ -181,26 +181,41 @@ class _Norm:
 
 
 def _normalise(data: FitData) -> _Norm | None:
-    pts = np.vstack([data.tip_points, data.link_a, data.link_b])
-    mu = pts.mean(axis=0)
-    scale = float(np.sqrt(np.mean(np.sum((pts - mu) ** 2, axis=1))))
+    nt, nl = data.n_tip, data.n_link
+    c = np.vstack([data.tip_points, data.link_a, data.link_b])
+    n = len(c)
+    # the column sums as a matrix product: numpy's reduction down the long axis of an
+    # (N, d) array costs more than the rest of a small fit; the sum of squares by einsum (a
+    # BLAS dot of more than ~10^4 numbers starts threads that spin on a loaded machine)
+    mu = (np.ones(n) @ c) / n
+    c -= mu
+    scale = float(np.sqrt(np.einsum("ij,ij->", c, c) / n))
     if not scale > 1e-12 * (1.0 + float(np.abs(mu).max())):
         return None
+    c /= scale
     W = np.concatenate([data.tip_weight, data.link_weight])
     wm = float(W.mean())
     return _Norm(
-        mu, scale, (data.tip_points - mu) / scale, data.tip_radius / scale,
-        data.tip_weight / wm, (data.link_a - mu) / scale, (data.link_b - mu) / scale,
-        data.link_radius / scale, data.link_weight / wm, (data.free_points - mu) / scale,
+        mu, scale, c[:nt], data.tip_radius / scale, data.tip_weight / wm, c[nt:nt + nl],
+        c[nt + nl:], data.link_radius / scale, data.link_weight / wm,
+        (data.free_points - mu) / scale,
     )
 
 
 def _rank(points: np.ndarray) -> int:
-    c = points - points.mean(axis=0)
-    s = np.linalg.svd(c, compute_uv=False)
-    if s.size == 0 or s[0] <= 0:
+    """Rank of the centred point cloud: singular values above ``1e-7`` of the largest, from
+    the eigenvalues of the ``d x d`` scatter matrix (their rounding, ``~1e-8`` of the spread
+    after the square root, is below the threshold; an SVD of the ``(N, d)`` cloud costs
+    more than the rest of a small fit)."""
+    n = len(points)
+    if n == 0:
         return 0
-    return int(np.sum(s > 1e-7 * s[0]))
+    c = points - (np.ones(n) @ points) / n
+    ev = np.linalg.eigvalsh(c.T @ c)
+    s = np.sqrt(np.maximum(ev, 0.0))
+    if s.size == 0 or s[-1] <= 0:
+        return 0
+    return int(np.sum(s > 1e-7 * s[-1]))
 
 
 # --------------------------------------------------------------------------- numeric residuals
@@ -245,6 +260,17 @@ def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np
     return clearance(a + t[:, None] * d), t
 
 
+def _link_t(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Least clearance along each link and its t: closed form where the type has one (then
+    ``True``), else the sampled and bracketed numeric minimum (``False``)."""
+    exact = _closed_form_min(m, th, side, a, b)
+    if exact is not None:
+        return exact[0], exact[1], True
+    val, t = segment_min_numeric(lambda p: side * signed_distance_np(m, th, p), a, b)
+    return val, t, False
+
+
 def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least clearance along each link: value, t and whether t is a smooth interior minimum
@@ -254,9 +280,8 @@ def _link_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarra
 
     def fn(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
-    exact = _closed_form_min(m, th, side, a, b)
-    val, t = exact if exact is not None else segment_min_numeric(fn, a, b)
-    if m.linear or len(a) == 0:
+    val, t, _ = _link_t(m, th, side, a, b)
+    if m.linear:
         return val, t, np.zeros(len(a), dtype=bool)
     h = 1e-3
     tl, tr = np.clip(t - h, 0, 1), np.clip(t + h, 0, 1)
@@ -401,12 +426,12 @@ def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, de
     bound or inequality constraint (IPOPT handles the active set)."""
     from wholearm_tools.fit import solve as lm
 
-    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_min, rho_np, _irls_weight)
+    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_t, rho_np, _irls_weight)
     finite = bool(np.all(np.isfinite(res.th)))
     if finite and not lm.on_bound(m, res.th):
-        _, t, interior = _link_min(m, res.th, side, nd.a, nd.b)
+        interior = (res.t > _T_EDGE) & (res.t < 1 - _T_EDGE)
         status = "Solve_Succeeded" if res.converged else "Maximum_Iterations_Exceeded"
-        return _Solve(res.th, t, interior, status, res.converged, res.iterations, res.cost)
+        return _Solve(res.th, res.t, interior, status, res.converged, res.iterations, res.cost)
     sol = _solve(m, nd, res.th if finite else th0, side, "linear", 1.0, max_iter)
     if sol.success and loss != "linear":
         sol = _solve_robust(m, nd, sol, side, loss, delta, max_iter)
@@ -417,10 +442,11 @@ def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, de
 # --------------------------------------------------------------------------- covariance
 
 
-def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float
-                     ) -> tuple[np.ndarray, float]:
+def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float,
+                     outliers: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Covariance of the raw parameters (normalised units; NaN when not determined) and the
-    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale)."""
+    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale).
+    Contacts flagged in ``outliers`` (read as outliers by a robust fit) do not count."""
     from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
     nt, nl = len(nd.tip), len(nd.a)
@@ -441,9 +467,12 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
     lam_min = float(lam[0]) if lam.size else 0.0
     sens = 1.0 / math.sqrt(lam_min) if lam_min > 0 else math.inf
     nan = np.full((m.n_raw, m.n_raw), np.nan)
+    w_rob = _irls_weight(z, loss, delta)
+    if outliers is not None:
+        w_rob = np.where(outliers, 0.0, w_rob)
+        n -= int(np.count_nonzero(outliers))
     if n <= m.dof:
         return nan, sens
-    w_rob = _irls_weight(z, loss, delta)
     H = Jm.T @ (w_rob[:, None] * Jm)
     s2 = float(np.sum(w_rob * z * z) / (n - m.dof))
     try:
@@ -522,6 +551,9 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
     """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
     link axes, which are in free space) all lie clearly on one side of the initial guess;
     otherwise both, and :func:`_pick_side` decides on the fitted surfaces."""
+    no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
+    if no_radius and len(nd.free) == 0:
+        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
     ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
     cands = [c for c in m.init(ctx) if np.all(np.isfinite(c))]
     if not cands:
@@ -534,9 +566,6 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
         if out + inn == len(pts) and (out == 0 or inn == 0):
             return [1.0 if out else -1.0]
         break
-    no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
-    if no_radius and len(nd.free) == 0:
-        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
     return [1.0, -1.0]
 
 
@@ -711,6 +740,7 @@ def fit_primitive(
     initial: dict[str, Any] | None = None,
     max_iter: int = 200,
     good_rms: float | None = None,
+    covariance: bool = True,
 ) -> FitResult:
     """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
 
@@ -729,22 +759,31 @@ def fit_primitive(
         ``initial`` line or plane is taken with its normal towards free space).
     loss : "linear", "huber" or "cauchy"
         Robust losses are smooth: pseudo-Huber ``d^2 (sqrt(1 + (z/d)^2) - 1)`` and Cauchy
-        ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.
+        ``d^2/2 log(1 + (z/d)^2)`` on weighted residuals ``z = sqrt(W) r``.  With no
+        ``initial``, a robust fit starts from a consensus of minimal contact sets and reads
+        the contacts beyond 2.5 noise levels of it as outliers, which then count at that
+        fixed cost instead of pulling (:func:`wholearm_tools.fit.robust.robust_fit`).
     loss_scale : float
         ``d`` in units of ``noise``.
     noise : float or None
-        Residual noise level sigma in metres (used by robust losses); None estimates it from a
-        linear fit (1.4826 x median absolute weighted residual).
+        Residual noise level sigma in metres (used by robust losses); None estimates it: with
+        ``initial``, from a linear fit (1.4826 x median absolute weighted residual); without,
+        on the consensus inliers.
     initial : dict or None
         Initial map.json parameters; default algebraic guesses (several starts for
-        cylinders, cones and tori).
+        cylinders, cones and tori), or the consensus start for a robust loss.
     max_iter : int
-        IPOPT iteration limit per solve.
+        Iteration limit per solve (Levenberg-Marquardt, and IPOPT where it takes over).
     good_rms : float or None
         An RMS residual [m] (dof-corrected) the caller would accept.  With a short
         ``max_iter``, when no converged start reaches it, the lowest-cost start the limit cut
         off is let finish (up to 200 iterations): a wrong basin converges fast, the right one
         may not (seven link contacts on a post).  None: starts are not finished.
+    covariance : bool
+        Compute the parameter covariance, the 95 % intervals and the sensitivity (the
+        Gauss-Newton information at the optimum).  False skips them for fits whose
+        uncertainty nobody reads (proposals that do not reach selection): ``covariance`` is
+        then None, ``ci95`` empty and ``sensitivity`` NaN.
 
     Returns
     -------
@@ -804,11 +843,28 @@ def fit_primitive(
         sides = _decide_side(m, nd)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
+    outliers: dict[float, np.ndarray] = {}
     for side in sides:
+        if loss != "linear" and initial is None:
+            # no start: a consensus of minimal sets gives the inliers, their least-squares
+            # fit starts the robust loss, their noise sets its scale (fit.robust)
+            from wholearm_tools.fit.robust import robust_fit
+
+            # (a fixed stream: the fit is a function of its data)
+            rf = robust_fit(m, nd, side, loss, loss_scale, noise / nd.scale if noise else None,
+                            np.random.default_rng(0), max_iter)
+            if rf is not None:
+                t = _link_t(m, rf.th, side, nd.a, nd.b)[1] if len(nd.a) else np.zeros(0)
+                fits[side] = _Solve(rf.th, t, (t > _T_EDGE) & (t < 1 - _T_EDGE), rf.status,
+                                    rf.success, rf.iterations, rf.cost)
+                deltas[side] = rf.delta
+                outliers[side] = ~rf.inliers
+                continue
         ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
         cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
         cands = [c for c in cands if np.all(np.isfinite(c))]
-        scored = sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0))
+        scored = (cands if len(cands) < 2 else
+                  sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0)))
         def consider(sol: _Solve, side: float = side) -> None:
             delta = loss_scale * (noise / nd.scale if noise else 1.0)
             if loss != "linear" and sol.success:
@@ -837,6 +893,7 @@ def fit_primitive(
         return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
     side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
+                        covariance=covariance, outliers=outliers.get(side),
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
                         and len(nd.free) + len(nd.a) == 0)
@@ -873,7 +930,8 @@ def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
 
 
 def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
-                 delta: float, labels: tuple[str, ...], ambiguous: bool) -> FitResult:
+                 delta: float, labels: tuple[str, ...], ambiguous: bool,
+                 covariance: bool = True, outliers: np.ndarray | None = None) -> FitResult:
     th = sol.th.copy()
     if m.linear and side < 0:  # report lines and planes with the normal towards free space
         th[: m.dim] *= -1.0
@@ -883,8 +941,12 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     rt_m, rl_m = rt * nd.scale, rl * nd.scale
     params = _denormalise(m, m.to_params(th), nd)
     # covariance (normalised raw) -> map params -> metres
-    cov_raw, sens = (_covariance_norm(m, nd, sol, side, loss, delta) if sol.success
-                     else (None, math.inf))
+    if not covariance:
+        cov_raw, sens = None, math.nan
+    elif sol.success:
+        cov_raw, sens = _covariance_norm(m, nd, sol, side, loss, delta, outliers)
+    else:
+        cov_raw, sens = None, math.inf
     cov = ci = None
     ci95: dict[str, tuple[Any, Any]] = {}
     if cov_raw is not None:
@@ -892,7 +954,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
         _, roles = _labels(m)
         D = np.where(roles < 0, nd.scale, 1.0)
         cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
-        n = data.n_contacts
+        n = data.n_contacts - (0 if outliers is None else int(np.count_nonzero(outliers)))
         q = _t975(n - m.dof) if n > m.dof else np.nan
         sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
         k = 0
@@ -924,6 +986,9 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     if ambiguous and sol.success:
         msg += ("; free side not determined by the data (no free-space hints): assumed the "
                 "base-frame origin is in free space")
+    if outliers is not None and np.any(outliers):
+        msg += (f"; {int(np.count_nonzero(outliers))} of {len(outliers)} contacts read as "
+                "outliers of the consensus")
     return FitResult(
         kind=m.kind, success=sol.success, message=msg + note, status=sol.status,
         iterations=sol.iterations, cost=cost, params=params, free_side=float(side),
