@@ -42,8 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
-from wholearm_tools.fit.data import FitData
-from wholearm_tools.fit.models import MODELS, InitContext
+from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings
 from wholearm_tools.fit.result import FitResult
@@ -405,7 +404,7 @@ class _Context:
     min_radius: float
     max_radius_ratio: float
     seed_extra: int
-    trials: int
+    trials: int                 # minimal sets per seed and type
     key: int
     free: FloatArray            # (K, d) free-space points (robot positions)
     max_iter: int               # solver iterations of a seed fit
@@ -427,60 +426,24 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
                  start: FitResult | None = None, free_points: FloatArray | None = None,
-                 max_iter: int = 200) -> FitResult:
+                 max_iter: int = 200, covariance: bool = True) -> FitResult:
     """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given); ``free_points``
-    (robot positions: free space) tell a closed primitive's free side."""
+    (robot positions: free space) tell a closed primitive's free side; ``covariance`` False
+    skips the covariance and sensitivity (a proposal that only needs the parameters)."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
-                          max_iter=max_iter)
+                          max_iter=max_iter, covariance=covariance)
         if f:
             return f
-    return fit_primitive(kind, data, max_iter=max_iter)
-
-
-def _quick_guesses(kind: str, readings: Readings, idx: IntArray
-                   ) -> list[tuple[float, FloatArray, object]]:
-    """Algebraic guesses (no solver) of ``kind`` through readings ``idx``, both free sides:
-    ``(free side, raw normalised parameters, the normalisation)``."""
-    from wholearm_tools.fit.core import _normalise
-
-    m = MODELS[kind]
-    data = readings.fit_data(idx)
-    nd = _normalise(data)
-    if nd is None:
-        return []
-    out = []
-    for side in ([1.0] if m.linear else [1.0, -1.0]):
-        ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
-        try:
-            guess = m.quick_init(ctx) if m.quick_init else m.init(ctx)[:1]
-        except (np.linalg.LinAlgError, ValueError, IndexError):
-            continue
-        for th in guess:
-            if np.all(np.isfinite(th)):
-                out.append((side, th, nd))
-    return out
-
-
-def _guess_residuals(kind: str, side: float, th: FloatArray, nd: object, data: FitData
-                     ) -> FloatArray:
-    """Residuals [m] of ``data`` (fit order: tips, then links) under a normalised raw guess."""
-    from wholearm_tools.fit.core import _Norm, _residuals_norm
-
-    m = MODELS[kind]
-    mu, scale = nd.mu, nd.scale  # type: ignore[attr-defined]
-    nd2 = _Norm(mu, scale, (data.tip_points - mu) / scale, data.tip_radius / scale,
-                data.tip_weight, (data.link_a - mu) / scale, (data.link_b - mu) / scale,
-                data.link_radius / scale, data.link_weight, data.free_points)
-    rt, rl, _, _ = _residuals_norm(m, th, side, nd2)
-    return np.concatenate([rt, rl]) * scale
+    return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance)
 
 
 def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
-    """Hypotheses at one seed contact, per type, from its ``dof + 2 + seed_extra`` nearest
-    contacts: all of them by their most probable readings, and the consensus of minimal sets of
-    them (RANSAC on algebraic guesses: near the edge of a surface the nearest contacts mix two);
+    """Hypotheses at one seed contact, per type: its ``dof + 2`` nearest contacts by their most
+    probable readings, and the consensus of minimal sets among its ``dof + 2 + seed_extra``
+    nearest (RANSAC: near the edge of a surface the nearest contacts mix two, and ambiguous
+    contacts are read both ways);
     each fitted and polished (:func:`_polish`), and extended where not determined
     (:func:`_extend`).  Types with more than five parameters (cone,
     torus) are not seeded: on a seed's few contacts they fit almost any patch and their guesses
@@ -496,31 +459,40 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         near = ctx.order[anchor, :m.dof + 2 + ctx.seed_extra]
         if len(near) < m.dof + 2:
             continue
-        # the whole neighbourhood by its prior readings, fitted and polished
-        start = np.sort(near)
+        # the dof + 2 nearest by their prior readings (small, so rarely two surfaces), fitted
+        # and polished
+        start = np.sort(near[:m.dof + 2])
         f = fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
                          max_iter=ctx.max_iter)
         polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
         if polished is not None:
             out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
         sel = np.flatnonzero(np.isin(rd.contact, near))
-        data_sel = rd.fit_data(sel)
-        pos_sel = Readings.fit_order(rd.sphere[sel])
         others = near[near != anchor]
         best_key, best = (-1, -np.inf), None
         for _ in range(ctx.trials):
+            # a minimal set (dof + 1 contacts, the anchor among them), each by a reading drawn
+            # by its prior, fitted exactly: algebraic guesses from link contacts are too rough
             pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)), replace=False)]
-            for side, th, nd in _quick_guesses(kind, rd, ctx.prior_best[pick]):
-                r = np.abs(_guess_residuals(kind, side, th, nd, data_sel))[pos_sel]
-                best_r = np.full(rd.n_contacts, np.inf)
-                np.minimum.at(best_r, rd.contact[sel], r)
-                inl = near[best_r[near] <= ctx.tol]
-                if anchor not in inl:
-                    continue
-                key = (len(inl), -float(np.sum(np.minimum(best_r[near], ctx.tol) ** 2)))
-                if key > best_key:
-                    best_key, best = key, (inl, r)
-            if best is not None and len(best[0]) == len(near):
+            idx = []
+            for c in pick:
+                rs = np.flatnonzero(rd.contact == c)
+                p = np.exp(rd.log_prior[rs])
+                idx.append(int(rng.choice(rs, p=p / p.sum())))
+            g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free, max_iter=20,
+                             covariance=False)
+            if not g:
+                continue
+            r = np.abs(_residuals_of(g, rd, sel))
+            best_r = np.full(rd.n_contacts, np.inf)
+            np.minimum.at(best_r, rd.contact[sel], r)
+            inl = near[best_r[near] <= ctx.tol]
+            if anchor not in inl:
+                continue
+            key = (len(inl), -float(np.sum(np.minimum(best_r[near], ctx.tol) ** 2)))
+            if key > best_key:
+                best_key, best = key, (inl, r)
+            if len(inl) == len(near):
                 break
         if best is None or len(best[0]) < m.dof + 2:
             continue

@@ -77,7 +77,7 @@ class FitPolicy:
     seed_extra: int = 6
     seed_accept: float = 2.5
     seed_extend: int = 12
-    consensus_trials: int = 24
+    consensus_trials: int = 12
     rounds: int = 3
     em_rounds: int = 6
     neighbours: int = 6
