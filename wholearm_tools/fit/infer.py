@@ -593,6 +593,47 @@ def _residuals_of(f: FitResult, rd: Readings, rows: IntArray) -> FloatArray:
     return r[Readings.fit_order(rd.sphere[rows])]
 
 
+def _plain(ctx: _Context, anchor: int) -> float:
+    """The best dof-corrected RMS [m] over the simpler types of a fit to the ``dof + 2``
+    contacts nearest ``anchor``, each by its most probable reading (the noise estimate's
+    sample: :func:`_noise_from_seeds`)."""
+    best = math.inf
+    for kind in ctx.kinds:
+        m = MODELS[kind]
+        if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
+            continue
+        near = np.sort(ctx.order[anchor, :m.dof + 2])
+        if len(near) < m.dof + 2:
+            continue
+        f = fit_readings(kind, ctx.readings, ctx.prior_best[near], free_points=ctx.free,
+                         max_iter=ctx.max_iter, covariance=False)
+        if f:
+            best = min(best, _rms_dof(f))
+    return best
+
+
+def _plain_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
+                ) -> list[float]:
+    if executor is None or len(anchors) < 2:
+        return [_plain(ctx, a) for a in anchors]
+    return list(executor.map(_plain, [ctx] * len(anchors), anchors))
+
+
+def _noise_from_seeds(best: FloatArray) -> float:
+    """Noise level from the best dof-corrected RMS of ``K`` seed fits of ``dof + 2`` contacts.
+
+    A seed inside one surface has RMS ``sigma sqrt(chi2_2 / 2)``: its 10th percentile is
+    ``0.325 sigma`` and the best of ``K`` sits near the ``1/K`` quantile ``sqrt(-ln(1 - 1/K))
+    sigma``.  Both agree within a small factor when most seeds are clean; when most straddle
+    two surfaces (next to a junction) the percentile measures the mismatch, and the best seed
+    is used instead."""
+    if best.size == 0:
+        return 0.0
+    pct = float(np.percentile(best, 10)) / 0.325
+    low = float(np.min(best)) / math.sqrt(-math.log(1.0 - 1.0 / max(best.size, 2)))
+    return pct if pct <= 3.0 * low else low
+
+
 def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
                ) -> list[list[tuple[str, IntArray, IntArray, FitResult]]]:
     """:func:`_seed` at each anchor (in worker processes when given an executor)."""
@@ -750,25 +791,17 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 seen.add(k_)
                 pool.append(h)
 
-    # ---- first seeds: the noise level from the best seeds, then consensus seeds
+    # ---- the noise level from plain fits at the seed contacts, then the seeds
     anchors = _farthest(rep, policy.max_seeds, rng)
-    per_anchor = _seed_many(context(sigma, policy.noise is not None), anchors, executor)
     if policy.noise is None:
-        best = np.array([min((_rms_dof(f) for *_, f in hs), default=np.inf)
-                         for hs in per_anchor])
-        best = best[np.isfinite(best)]
-        if best.size:
-            # a seed inside one surface fits at the noise level: the lower decile of the
-            # seeds' best RMS (dof-corrected) estimates it; seeds that mix surfaces fit worse
-            sigma = max(float(np.percentile(best, 10)), floor)
-            scorer.set_sigma(sigma)
-        # seeds that fit poorly at that level are tried again, trimmed to it
-        redo = [i for i, hs in enumerate(per_anchor)
-                if not any(_rms_dof(f) <= policy.seed_accept * sigma for *_, f in hs)]
-        again = _seed_many(context(sigma, True), [anchors[i] for i in redo], executor)
-        for i, hs in zip(redo, again, strict=True):
-            per_anchor[i] = per_anchor[i] + hs
-    add(grow_new([make(k, f, mem, rd_, "seed") for hs in per_anchor
+        plain = _plain_many(context(sigma, False), anchors, executor)
+        sigma = max(_noise_from_seeds(np.array([p for p in plain if math.isfinite(p)])),
+                    floor)
+        scorer.set_sigma(sigma)
+        if diagnostics is not None:
+            diagnostics["sigma_seeds"] = (sigma, sorted(plain))
+    add(grow_new([make(k, f, mem, rd_, "seed")
+                  for hs in _seed_many(context(sigma, True), anchors, executor)
                   for k, mem, rd_, f in hs]))
 
     history: list[float] = []
