@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import click
-import numpy as np
 
 from cli.reconstruct import summary_lines
 
@@ -37,7 +36,7 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
             B: float | None) -> None:
     """Run the whole pipeline on a simulated run and write every deliverable."""
     from wholearm_tools.logs import read_run, write_run
-    from wholearm_tools.mesh import export_mesh, map_mesh, write_overlay
+    from wholearm_tools.mesh import export_map, write_overlay
     from wholearm_tools.outputs import write_reconstruction
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report import write_report
@@ -68,17 +67,10 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
     click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
 
     t = _step("meshing and exporting " + ", ".join(MESH_FORMATS))
-    mesh = map_mesh(rec.surface_map)
     for fmt in MESH_FORMATS:
-        paths[f"mesh.{fmt}"] = export_mesh(mesh, out_dir / f"map.{fmt}", fmt)
-    table = rec.table
-    paths["overlay"] = write_overlay(
-        out_dir / "overlay.mcap", rec.surface_map,
-        contact_points=table.tip_center[table.used_as_tip],
-        contact_p_tip=table.p_tip[table.used_as_tip],
-        contact_segments=np.stack([table.seg_a[~table.used_as_tip],
-                                   table.seg_b[~table.used_as_tip]], axis=1),
-        t0_ns=rec.run.log.t0_ns)
+        paths[f"mesh.{fmt}"] = export_map(rec.surface_map, out_dir / f"map.{fmt}", fmt)
+    paths["overlay"] = write_overlay(out_dir / "overlay.mcap", rec.surface_map, rec.table,
+                                     t0_ns=rec.run.log.t0_ns)
     click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
 
     t = _step("writing the PDF report")
