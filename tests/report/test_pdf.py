@@ -98,8 +98,8 @@ def test_junction_answer_in_plain_words_with_uncertainty():
     v45 = np.array([np.sqrt(0.5), 0.0, np.sqrt(0.5)])
     c = np.array([0.0, 0.0, 0.35])
     cov = np.diag([1e-8] * 3 + [1e-6] * 3 + [4e-8])
-    prims = (cylinder(0, [*c, 0, 0, 0.1], (0, 0, 1), 0.18, (-0.5, 0.1), support=(20, 4),
-                      cov=cov),
+    up = np.array([0.0, 0.0, 0.1])
+    prims = (cylinder(0, c + up, (0, 0, 1), 0.18, (-0.5, 0.1), support=(20, 4), cov=cov),
              cylinder(1, c + 0.2 * v45, v45, 0.12, (0.2, 0.7), support=(8, 1), cov=cov))
     sm = SurfaceMap(planar=False, B=0.02, primitives=prims)
     from wholearm_tools.report.junction import junction_summary

@@ -126,8 +126,33 @@ def _opt(x: float | None, fmt: str, scale: float = 1.0) -> str:
         else text
 
 
+def _placement_text(p: Any) -> str:
+    """Where a line or plane lies: its distance from the robot base (± 95 %, from the point's
+    half-widths along the normal) and its direction or normal."""
+    point = np.asarray(p.params.get("point", ()), float)
+    if p.kind == "line" and point.size == 2:
+        d = np.asarray(p.params["direction"], float)
+        normal = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300)
+        heading = math.degrees(math.atan2(d[1], d[0])) % 180.0
+        orient = f"running at {_num(heading, 1)}° from x"
+    elif p.kind == "plane" and point.size == 3:
+        normal = np.asarray(p.params["normal"], float)
+        normal = normal / max(float(np.linalg.norm(normal)), 1e-300)
+        orient = "normal (" + ", ".join(_num(x, 3) for x in normal) + ")"
+    else:
+        return ""
+    ci = np.asarray(p.ci95.get("point", np.full(point.shape, np.nan)), float) if p.ci95 \
+        else np.full(point.shape, np.nan)
+    half = float(np.sqrt(np.sum((normal * ci) ** 2))) if ci.shape == point.shape else math.nan
+    dist = abs(float(normal @ point))
+    return f"{fmt_pm(dist, half, scale=1e3, unit='mm')} from the robot base, {orient}"
+
+
 def _size_text(p: Any) -> str:
-    """Key size of a primitive with its 95 % half-width: diameters in mm, half-angle in °."""
+    """Key size of a primitive with its 95 % half-width: diameters in mm, half-angle in °;
+    for lines and planes, where they lie."""
+    if p.kind in ("line", "plane"):
+        return _placement_text(p)
     parts = []
     for k in SIZE_KEYS:
         if k not in p.params:
@@ -179,7 +204,7 @@ def _answer(data: Any, junction: JunctionSummary | None) -> list[str]:
         size = _size_text(p)
         sup = p.support.get("tip", 0) + p.support.get("link", 0)
         out.append(f"• {surface_label(p.id, p.kind)}: {size + ', ' if size else ''}"
-                   f"from {sup} contacts, RMS residual {_num(p.rms_residual * 1e3, 2)} mm")
+                   f"from {sup} contacts, RMS residual {_sig2(p.rms_residual * 1e3)} mm")
     bore = main_bore(m.primitives) if not m.planar else None
     if bore is not None:
         out.append(f"Surface #{bore.id} is a bore around the robot base ({_size_text(bore)}); "
@@ -222,8 +247,9 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     lines.append(f"Input: {run.source}" + (f" (sha256 {sha[:16]}…)" if sha else ""))
     if run.kind == "log" and run.duration is not None:
         kind = "planar" if m.planar else "spatial"
-        lines.append(f"Run: {run.duration:.1f} s at {run.rate:.0f} Hz, {kind} arm "
-                     f"{run.robot_name or ''} with {run.dof} joints".replace("  ", " "))
+        robot = f" '{run.robot_name}'" if run.robot_name else ""
+        lines.append(f"Run: {run.duration:.1f} s at {run.rate:.0f} Hz; {kind} arm{robot}, "
+                     f"{run.dof} joints")
     else:
         lines.append(f"Fitted from a contact table ({run.kind}); no log behind this map")
     if run.torque_source:
@@ -433,10 +459,10 @@ def _clip_line(p0: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray
     return np.stack([p0 + s0 * d, p0 + s1 * d])
 
 
-def draw_planar_map(ax: Any, data: Any, *, legend: bool = True, colorbar: bool = True) -> None:
-    """Draw a planar reconstruction on a matplotlib axis: surfaces in their fixed colours,
-    tip contacts as points and link contacts as segments coloured by P_T, true surfaces
-    dashed, the robot base."""
+def draw_planar_map(ax: Any, data: Any, *, legend_cols: int = 2) -> None:
+    """Draw a planar reconstruction on a matplotlib axis: surfaces in their fixed colours
+    (legend below the axes, with their sizes), tip contacts as points and link contacts as
+    segments coloured by P_T, true surfaces dashed, the robot base."""
     import matplotlib as mpl
     from matplotlib.collections import LineCollection
 
@@ -474,8 +500,10 @@ def draw_planar_map(ax: Any, data: Any, *, legend: bool = True, colorbar: bool =
                         label="true surface" if first else None, zorder=1)
                 first = False
     for p, pts in curves:
+        size = _size_text(p)
         ax.plot(pts[:, 0], pts[:, 1], "-", lw=2.6, color=surface_colour(p.id),
-                label=surface_label(p.id, p.kind), zorder=2, alpha=0.9)
+                label=surface_label(p.id, p.kind) + (f": {size}" if size else ""), zorder=2,
+                alpha=0.9)
     p_tip = np.asarray(table.p_tip)
     if len(segs):
         lc = LineCollection(segs[:, :, :2], cmap=cmap, norm=norm, linewidths=2.2, zorder=4)
@@ -492,12 +520,9 @@ def draw_planar_map(ax: Any, data: Any, *, legend: bool = True, colorbar: bool =
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.6)
-    if legend:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, frameon=False)
-    if colorbar:
-        cb = ax.figure.colorbar(mpl.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax,
-                                fraction=0.04, pad=0.02, location="left" if legend else "right")
-        cb.set_label("tip probability $P_T$", fontsize=8)
+    if legend_cols:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=7, frameon=False,
+                  ncols=legend_cols)
 
 
 # ------------------------------------------------------------------------------ 3-D map
@@ -543,13 +568,17 @@ def render_views(data: Any, *, size: tuple[int, int] = VIEW_SIZE,
     lo, hi = _bounds([np.asarray(table.tip_center), np.asarray(table.seg_b), np.zeros((1, 3))],
                      0.0)
     axis_len = 0.08 * max(float(np.max(hi - lo)), 0.2)
-    out = []
-    for title, direction in views:
-        pl = pv.Plotter(off_screen=True, window_size=list(size))
+    pl = pv.Plotter(off_screen=True, window_size=list(size))
+    try:
         pl.set_background("white")
         for p, mesh, _ in meshes:
             pl.add_mesh(mesh, color=surface_colour(p.id), opacity=0.5, smooth_shading=True,
                         show_edges=False)
+            # the patch's border in its colour: a surface seen edge-on stays visible
+            pl.add_mesh(mesh.extract_feature_edges(boundary_edges=True, feature_edges=False,
+                                                   manifold_edges=False,
+                                                   non_manifold_edges=False),
+                        color=surface_colour(p.id), line_width=2)
         if tips.size:
             cloud = pv.PolyData(np.asarray(table.tip_center)[tips])
             cloud["P_T"] = p_tip[tips]
@@ -573,13 +602,16 @@ def render_views(data: Any, *, size: tuple[int, int] = VIEW_SIZE,
             pl.add_mesh(pv.Arrow(start=(0.0, 0.0, 0.0), direction=axis, scale=axis_len,
                                  tip_radius=0.08, shaft_radius=0.025), color=colour)
         pl.enable_parallel_projection()
-        pl.camera_position = _camera(data, direction)
-        pl.reset_camera()               # fit every actor (meshes and contacts) in the view
-        pl.camera.zoom(1.15)
-        mpp = 2.0 * float(pl.camera.parallel_scale) / size[1]
-        img = pl.screenshot(return_img=True)
+        out = []
+        for title, direction in views:          # one scene, one camera per view
+            pl.camera_position = _camera(data, direction)
+            pl.reset_camera()           # fit every actor (meshes and contacts) in the view
+            pl.camera.zoom(1.15)
+            mpp = 2.0 * float(pl.camera.parallel_scale) / size[1]
+            img = pl.screenshot(return_img=True)
+            out.append(View(title, _crop(np.asarray(img)[:, :, :3]), mpp))
+    finally:
         pl.close()
-        out.append(View(title, _crop(np.asarray(img)[:, :, :3]), mpp))
     return out
 
 
@@ -619,7 +651,7 @@ def _nice_length(x: float) -> float:
 def _show_view(ax: Any, view: View, title: str | None = None) -> None:
     """A rendered view with its scale bar (surfaces are named by the page's legend)."""
     h, w = view.image.shape[:2]
-    ax.imshow(view.image, interpolation="antialiased")
+    ax.imshow(view.image, interpolation="none")
     ax.set_title(title or view.title, fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
@@ -692,15 +724,15 @@ def _summary_page(data: Any, title: str, accuracy: AccuracyReport | None,
     legend_h = 0.35 + 0.17 * len(data.surface_map.primitives)
     height = ph - top - MARGIN - legend_h
     if data.surface_map.planar:
-        ax = fig.add_axes(((left + 0.45) / pw, (MARGIN + legend_h + 0.35) / ph,
-                           (width - 0.45) / pw, (height - 0.35) / ph))
-        draw_planar_map(ax, data, legend=False, colorbar=False)
+        ax = fig.add_axes(((left + 0.45) / pw, (MARGIN + 1.3) / ph, (width - 0.45) / pw,
+                           (ph - top - MARGIN - 1.6) / ph))
+        draw_planar_map(ax, data, legend_cols=1)
         ax.set_title("map (true surfaces dashed)", fontsize=9)
     elif views:
         ax = fig.add_axes((left / pw, (MARGIN + legend_h) / ph, width / pw, height / ph))
         _show_view(ax, views[0], f"map, {views[0].title} view")
-    if data.surface_map.planar or views:
         _surface_legend(fig, data, (left / pw, (MARGIN + legend_h) / ph))
+    if data.surface_map.planar or views:
         _ptip_colorbar(fig, ((pw - MARGIN - 0.35) / pw, 0.35, 0.1 / pw, 0.35))
     return fig
 
@@ -711,8 +743,9 @@ def _map_pages(data: Any, views: list[View] | None) -> list[Any]:
         fig = _page("Map", "fitted surfaces over their extents in their colours; tip contacts "
                     "as points, link contacts as segments, coloured by P_T; true surfaces "
                     "dashed; ▲ robot base")
-        ax = fig.add_axes((0.12, 0.08, 0.60, 0.76))
+        ax = fig.add_axes((0.07, 0.2, 0.80, 0.66))
         draw_planar_map(ax, data)
+        _ptip_colorbar(fig, (0.92, 0.3, 0.1 / pw, 0.4))
         return [fig]
     fig = _page("Map", "parallel projections; surfaces labelled #id in their colours; contacts "
                 "coloured by P_T (points: tip, segments: link); robot base black, with its x, "
