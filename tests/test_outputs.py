@@ -265,3 +265,28 @@ def test_cli_reconstruct_writes_every_output_or_nothing(short_rec, tmp_path):
                                    "--joint-topic", "/nothing"])
     assert res.exit_code == 1
     assert listing(tmp_path) == ["all", "some"]          # a failed run leaves nothing
+
+
+def test_a_folder_from_before_report_data_still_reports(short_rec, tmp_path):
+    """An older output folder (map.json and contacts.csv only) reports from the contact table;
+    a folder with neither report data nor a table says what is missing."""
+    out = tmp_path / "old"
+    write_reconstruction(out, short_rec, **LIGHT)
+    (out / "report_data.json").unlink()
+    doc = json.loads((out / "map.json").read_text())
+    for key in ("outputs", "input", "tool", "created", "parameters"):
+        doc["meta"].pop(key)
+    (out / "map.json").write_text(json.dumps(doc))
+    data = load_report_data(out)
+    assert len(data.table) == len(short_rec.table)
+    assert data.ptip_history is None
+    assert data.run.truth is None
+    from wholearm_tools.report import write_report
+
+    info = write_report(tmp_path / "old.pdf", data)
+    assert info.pages[:2] == ("Summary", "Map")
+    (out / "contacts.csv").unlink()
+    from wholearm_tools.errors import InputError
+
+    with pytest.raises(InputError, match=r"no report data and no contact table beside map\.json"):
+        load_report_data(out)

@@ -245,11 +245,13 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     record = meta.get("input") or {}
     sha = record.get("sha256") or run.sha256
     lines.append(f"Input: {run.source}" + (f" (sha256 {sha[:16]}…)" if sha else ""))
-    if run.kind == "log" and run.duration is not None:
-        kind = "planar" if m.planar else "spatial"
+    if run.kind == "log":
         robot = f" '{run.robot_name}'" if run.robot_name else ""
-        lines.append(f"Run: {run.duration:.1f} s at {run.rate:.0f} Hz; {kind} arm{robot}, "
-                     f"{run.dof} joints")
+        parts = [f"{run.duration:.1f} s" + (f" at {run.rate:.0f} Hz" if run.rate else "")]\
+            if run.duration is not None else []
+        parts.append(f"{'planar' if m.planar else 'spatial'} arm{robot}"
+                     + (f", {run.dof} joints" if run.dof else ""))
+        lines.append("Run: " + "; ".join(parts))
     else:
         lines.append(f"Fitted from a contact table ({run.kind}); no log behind this map")
     if run.torque_source:
