@@ -49,7 +49,7 @@ def test_report_with_truth_opens_with_the_answer(planar_rec, tmp_path):
     assert lines[0] == f"{n} surface{'s' if n > 1 else ''} found (± = 95 % interval):"
     text = "\n".join(lines)
     assert "Against the simulator's ground truth" in text
-    assert "Torque evidence: commanded" in text
+    assert "Torque evidence: commanded torques (command topic)" in text
     assert f"B = {planar_rec.params.B:g} m" in text
     assert "Written by wholearm_tools" in text
     assert "2026-01-01T00:00:00Z" in text

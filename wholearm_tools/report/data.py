@@ -8,7 +8,8 @@ report OUT/`` renders again without the log and without refitting:
     what the report says about the input: its path (relative to the output folder), sha256,
     kind (``log`` or ``contact table``), duration, rate, clock start (``t0_ns``), number of
     joints, planar or spatial, robot name and joint names, the torque source the contacts were
-    detected from, the robot description (URDF of the capsule model used) and, for simulated
+    detected from and where it was read, the log's joints the robot's chain does not drive
+    (left out), the robot description (URDF of the capsule model used) and, for simulated
     runs, the ground truth (surfaces and per-contact truth, for the accuracy pages);
 ``contacts``
     the contact table's file (relative path) and sha256, checked on reading;
@@ -115,6 +116,8 @@ class RunInfo:
     robot_name: str | None = None
     joint_names: tuple[str, ...] = ()
     torque_source: str | None = None
+    torque_note: str = ""
+    ignored_joints: tuple[str, ...] = ()
     robot_urdf: str | None = None
     truth: Any = None          # wholearm_tools.logs.records.GroundTruth | None
 
@@ -180,6 +183,8 @@ def run_info(run: Any, source: str | None = None, sha256: str | None = None) -> 
         duration=float(log.duration), rate=float(log.rate), t0_ns=int(log.t0_ns),
         dof=int(robot.dof), planar=bool(robot.planar), robot_name=str(robot.name),
         joint_names=tuple(robot.joint_names), torque_source=torque_source_of(run),
+        torque_note=str(getattr(log, "torque_note", "") or ""),
+        ignored_joints=tuple(getattr(log, "ignored_joints", ()) or ()),
         robot_urdf=robot_to_urdf(robot), truth=run.truth)
 
 
@@ -267,6 +272,7 @@ def report_data_to_json(data: ReportData, contacts_path: str, contacts_sha256: s
                 "duration": run.duration, "rate": run.rate, "t0_ns": run.t0_ns,
                 "dof": run.dof, "planar": run.planar, "robot_name": run.robot_name,
                 "joint_names": list(run.joint_names), "torque_source": run.torque_source,
+                "torque_note": run.torque_note, "ignored_joints": list(run.ignored_joints),
                 "robot_urdf": run.robot_urdf, "truth": _truth_to_json(run.truth)},
         "fits": [{"id": f.id, "param_labels": list(f.param_labels), "free_side": f.free_side,
                   "tip_residuals": f.tip_residuals, "link_residuals": f.link_residuals}
@@ -312,7 +318,8 @@ def report_data_from_json(doc: Any, surface_map: SurfaceMap, table: ContactTable
             dof=None if r.get("dof") is None else int(r["dof"]),
             planar=bool(r.get("planar", surface_map.planar)),
             robot_name=r.get("robot_name"), joint_names=tuple(r.get("joint_names") or ()),
-            torque_source=r.get("torque_source"), robot_urdf=r.get("robot_urdf"),
+            torque_source=r.get("torque_source"), torque_note=str(r.get("torque_note") or ""),
+            ignored_joints=tuple(r.get("ignored_joints") or ()), robot_urdf=r.get("robot_urdf"),
             truth=_truth_from_json(r.get("truth"), source))
         fits = tuple(FitInfo(id=int(f["id"]), param_labels=tuple(f.get("param_labels", ())),
                              free_side=float(f.get("free_side", 1.0)),

@@ -255,11 +255,15 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     else:
         lines.append(f"Fitted from a contact table ({run.kind}); no log behind this map")
     if run.torque_source:
-        lines.append(f"Torque evidence: {run.torque_source} "
-                     + {"commanded": "torques (command topic)",
-                        "measured": "effort on the joint-state topic",
-                        "position": "position commands × controller stiffness"}.get(
-                            run.torque_source, ""))
+        plain = {"commanded": "commanded torques (command topic)",
+                 "measured": "measured effort (joint-state topic)",
+                 "position": "commanded position × controller stiffness"}
+        what = f"{run.torque_source}: {run.torque_note}" if run.torque_note else \
+            plain.get(run.torque_source, run.torque_source)
+        lines.append(f"Torque evidence: {what}")
+    if run.ignored_joints:
+        lines.append("Log joints off the arm's chain (not used): "
+                     + ", ".join(run.ignored_joints))
     lines.append(f"Contacts: {n} (tip {n_tip}, link {n_link}, ambiguous {n - n_tip - n_link})")
     lab = np.asarray(table.label_map).astype(str)
     if n and np.all(lab != ""):
