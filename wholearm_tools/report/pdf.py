@@ -10,13 +10,14 @@ atomically (a complete PDF or nothing).  Pages:
    the run: input file and its sha256, duration, contacts, the torque source they were detected
    from, every parameter, tool version and date; notes and warnings; and a 3-D view (planar
    runs: the 2-D map).
-2. **Map** — four views of the fitted surfaces (parallel projection, each with a scale bar and
-   the surfaces named in their fixed colours), tip contacts as points and link contacts as
-   segments coloured by P_T; planar runs: the 2-D drawing with the true surfaces dashed.
-3. **Primitives** — the junction's details (with truth and error when known), every parameter
-   ± 95 %, and the residual histograms, flowing over as many pages as they need.
-4. **P_T over the exploration** — the paper's Figure 4 (runs with a log).
-5. With ground truth only: **accuracy** of the primitives and of the contacts.
+2. **Map** — four views of the fitted surfaces (parallel projection, each with a scale bar,
+   surfaces labelled ``#id`` in their fixed colours and named in the legend, the robot base with
+   its axes), tip contacts as points and link contacts as segments coloured by P_T; planar
+   runs: the 2-D drawing with the true surfaces dashed.
+3. **Details**, flowing over as many pages as they fill: the junction's quantities (with truth
+   and error when known), every parameter ± 95 %, the residual histograms, P_T over the
+   exploration (the paper's Figure 4; runs with a log) and, with ground truth only, the
+   accuracy of the primitives and of the contacts.
 
 Numbers are printed to the digits their uncertainty supports (two significant digits of the
 95 % half-width), never as "± 0.0" or "-0.0".  The same data give the same bytes on the same
