@@ -171,3 +171,48 @@ def test_bad_arguments(planar_rec, tmp_path):
 
     with pytest.raises(OutputError, match="does not exist"):
         write_report(tmp_path / "missing" / "r.pdf", _without_truth(planar_rec), ptip_steps=5)
+
+
+def test_spatial_pages_stay_inside_the_page_with_long_surface_labels():
+    """A 3-D map (views, legend naming five surfaces with long size texts) without a log: every
+    text and axes of every page is inside the page, and there is no P_T page."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    from wholearm_tools.contact_table import ContactTable
+    from wholearm_tools.mapfile import MappedPrimitive
+    from wholearm_tools.mesh.extent import support_extent
+    from wholearm_tools.report.data import ReportData, RunInfo
+
+    v45 = np.array([np.sqrt(0.5), 0.0, np.sqrt(0.5)])
+    plane = {"point": np.array([0.0, 0.0, -0.08]), "normal": np.array([0.0, 0.0, 1.0])}
+    corners = np.array([[0.3, -0.2, -0.08], [0.5, 0.2, -0.08], [0.2, 0.3, -0.08]])
+    prims = [cylinder(i, [0.1 * i, 0.0, 0.3], v45 if i % 2 else (0, 0, 1), 0.05 + 0.01 * i,
+                      (-0.1, 0.1), cov=np.diag([1e-8] * 7)) for i in range(4)]
+    prims.append(MappedPrimitive(4, "plane", plane, extent=support_extent("plane", plane,
+                                                                          corners)))
+    m = 6
+    pts = np.c_[np.linspace(0.1, 0.4, m), np.zeros(m), np.full(m, 0.3)]
+    table = ContactTable(t=np.arange(m, dtype=float), link=np.full(m, 2), p_tip=np.full(m, 0.7),
+                         label=np.full(m, "tip"), variance=np.full(m, 1e-6),
+                         used_as_tip=np.arange(m) % 2 == 0, tip_center=pts,
+                         tip_radius=np.full(m, 0.01), seg_a=np.zeros((m, 3)), seg_b=pts,
+                         link_radius=np.full(m, 0.02), primitive=np.arange(m) % 5,
+                         residual=np.full(m, 1e-4))
+    data = ReportData(surface_map=SurfaceMap(planar=False, B=0.02, primitives=tuple(prims)),
+                      table=table, run=RunInfo(source="contacts.csv", kind="contact table"))
+    pages, accuracy, _ = report_pdf.build_pages(data)
+    assert accuracy is None
+    assert [name for name, _ in pages][:2] == ["Summary", "Map"]
+    for title, fig in pages:
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        renderer = canvas.get_renderer()
+        w = fig.bbox.width
+        ticks = {id(t) for ax in fig.axes for axis in (ax.xaxis, ax.yaxis)
+                 for t in axis.get_ticklabels(which="both")}
+        for t in fig.findobj(Text):
+            if t.get_visible() and t.get_text().strip() and id(t) not in ticks:
+                box = t.get_window_extent(renderer)
+                assert box.x1 <= w + 0.5, (title, t.get_text())
+                assert box.y0 >= -0.5, (title, t.get_text())

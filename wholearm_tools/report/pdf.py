@@ -674,17 +674,35 @@ def _show_view(ax: Any, view: View, title: str | None = None) -> None:
     ax.set_ylim(h - 0.5, -0.5)
 
 
-def _surface_legend(fig: Any, data: Any, loc: tuple[float, float], ncols: int = 1) -> None:
-    """The surfaces named in their fixed colours, with their sizes."""
+LEGEND_SIZE = 7.5
+
+
+def _legend_labels(data: Any, width: float) -> list[str]:
+    """Every surface's label and size, wrapped to ``width`` inches of legend."""
+    chars = max(int((width - 0.4) * 72 / (0.55 * LEGEND_SIZE)), 12)
+    return ["\n".join(textwrap.wrap(f"{surface_label(p.id, p.kind)}  {_size_text(p)}", chars,
+                                    subsequent_indent="  "))
+            for p in data.surface_map.primitives]
+
+
+def _legend_height(data: Any, width: float) -> float:
+    """Inches the surface legend takes at ``width``."""
+    lines = sum(label.count("\n") + 1 for label in _legend_labels(data, width))
+    return 0.35 + 0.16 * lines if lines else 0.0
+
+
+def _surface_legend(fig: Any, data: Any, loc: tuple[float, float], width: float) -> None:
+    """The surfaces named in their fixed colours, with their sizes, wrapped to ``width``
+    inches."""
     from matplotlib.patches import Patch
 
-    handles = [Patch(color=surface_colour(p.id), alpha=0.75,
-                     label=f"{surface_label(p.id, p.kind)}  {_size_text(p)}")
-               for p in data.surface_map.primitives]
+    handles = [Patch(color=surface_colour(p.id), alpha=0.75, label=label)
+               for p, label in zip(data.surface_map.primitives, _legend_labels(data, width),
+                                   strict=True)]
     if handles:
-        fig.legend(handles=handles, loc="upper left", bbox_to_anchor=loc, fontsize=7.5,
-                   frameon=False, ncols=ncols, title="surfaces (± 95 %)", title_fontsize=8,
-                   alignment="left")
+        fig.legend(handles=handles, loc="upper left", bbox_to_anchor=loc, fontsize=LEGEND_SIZE,
+                   frameon=False, title="surfaces (± 95 %)", title_fontsize=8,
+                   alignment="left", borderaxespad=0.0)
 
 
 def _ptip_colorbar(fig: Any, rect: tuple[float, float, float, float]) -> None:
@@ -728,7 +746,7 @@ def _summary_page(data: Any, title: str, accuracy: AccuracyReport | None,
     left = MARGIN + text_w + 0.3
     width = pw - left - MARGIN - 0.55
     top = MARGIN + 0.95
-    legend_h = 0.35 + 0.17 * len(data.surface_map.primitives)
+    legend_h = _legend_height(data, pw - left - MARGIN)
     height = ph - top - MARGIN - legend_h
     if data.surface_map.planar:
         ax = fig.add_axes(((left + 0.45) / pw, (MARGIN + 1.3) / ph, (width - 0.45) / pw,
@@ -738,7 +756,7 @@ def _summary_page(data: Any, title: str, accuracy: AccuracyReport | None,
     elif views:
         ax = fig.add_axes((left / pw, (MARGIN + legend_h) / ph, width / pw, height / ph))
         _show_view(ax, views[0], f"map, {views[0].title} view")
-        _surface_legend(fig, data, (left / pw, (MARGIN + legend_h) / ph))
+        _surface_legend(fig, data, (left / pw, (MARGIN + legend_h) / ph), pw - left - MARGIN)
     if data.surface_map.planar or views:
         _ptip_colorbar(fig, ((pw - MARGIN - 0.35) / pw, 0.35, 0.1 / pw, 0.35))
     return fig
@@ -767,7 +785,7 @@ def _map_pages(data: Any, views: list[View] | None) -> list[Any]:
                 w / pw, h / ph)
         _show_view(fig.add_axes(rect), view)
     x = pw - MARGIN - legend_w + 0.1
-    _surface_legend(fig, data, (x / pw, 1 - top / ph))
+    _surface_legend(fig, data, (x / pw, 1 - top / ph), pw - MARGIN - x)
     _ptip_colorbar(fig, ((x + 0.1) / pw, 0.12, 0.1 / pw, 0.35))
     return [fig]
 
