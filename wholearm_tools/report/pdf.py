@@ -885,8 +885,8 @@ def _detail_pages(data: Any, junction: JunctionSummary | None,
     if data.ptip_history is not None and data.ptip_times is not None:
         flow.heading("Tip probability over the exploration: causal replay (paper, Fig. 4), each "
                      "contact's P_T with the swept map up to each time; ● at the contact, ■ "
-                     "final offline value", keep=3.2)
-        top, h = flow.take(4.4, min_height=3.2)
+                     "final offline value", keep=2.8)
+        top, h = flow.take(4.4, min_height=2.8)
         pw, ph = PAGE_SIZE
         ax = flow.fig.add_axes(((MARGIN + 0.6) / pw, 1 - (top + h - 0.45) / ph,
                                 (flow.width - 0.7) / pw, (h - 0.75) / ph))
@@ -999,7 +999,7 @@ def _accuracy_blocks(flow: _Flow, acc: AccuracyReport) -> None:
     c = acc.classification
     flow.heading("Accuracy against ground truth: contacts (detections paired with true contacts "
                  "by time; truth 'tip' = tip or joint sphere, 'body' = side of the link)",
-                 keep=3.3)
+                 keep=2.95)
     cm_map = acc.classification_map
     text = [
         f"detected contacts        {c.n_detected}",
@@ -1015,7 +1015,7 @@ def _accuracy_blocks(flow: _Flow, acc: AccuracyReport) -> None:
            f"{cm_map.n_decided} decided,",
            f"                         {_pct(cm_map.ambiguous_fraction)} ambiguous, "
            f"Brier {_opt(cm_map.brier, '{:.3f}')}"] if cm_map is not None else [])]
-    top, h = flow.take(3.1, min_height=3.1)
+    top, h = flow.take(2.95, min_height=2.95)
     pw, ph = PAGE_SIZE
     fig = flow.fig
     fig.text(MARGIN / pw, 1 - (top + 0.1) / ph, "\n".join(text), fontsize=8, family=MONO,
