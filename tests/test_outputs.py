@@ -290,3 +290,17 @@ def test_a_folder_from_before_report_data_still_reports(short_rec, tmp_path):
 
     with pytest.raises(InputError, match=r"no report data and no contact table beside map\.json"):
         load_report_data(out)
+
+
+def test_the_working_directory_is_never_swapped_away(short_rec, tmp_path, monkeypatch):
+    import wholearm_tools.outputs as outputs
+
+    out = tmp_path / "out"
+    write_reconstruction(out, short_rec, **LIGHT)
+    monkeypatch.chdir(out)
+    swapped = []
+    monkeypatch.setattr(outputs, "_exchange", lambda a, b: swapped.append(b) or False)
+    write_reconstruction(".", short_rec, overwrite=True, **LIGHT)
+    assert swapped == []
+    assert os.path.samefile(os.getcwd(), out)
+    assert listing(out) == ["contacts.csv", "map.json", "report_data.json"]

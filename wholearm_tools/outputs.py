@@ -20,10 +20,11 @@ when the target also holds other files), and the set is put in place at the end:
   meanwhile, the rename fails and nothing is replaced);
 * target holding only outputs this writer may write (a previous set): the two folders are
   swapped atomically (Linux ``renameat2(RENAME_EXCHANGE)``) and the old set is deleted;
-* target holding other files too (e.g. ``-o .`` next to the log), or a system without the
-  swap: the old ``map.json`` is removed first, then the files are moved in one by one with
-  ``map.json`` last.  ``map.json`` records the sha256 of the files it was written with, and
-  the readers check them, so an interrupted set is recognised rather than mixed.
+* target holding other files too (e.g. ``-o .`` next to the log), the working directory, or on
+  a system without the swap: the old ``map.json`` is removed first, then the files are moved in
+  one by one with ``map.json`` last.  ``map.json`` records the sha256 of the files it was
+  written with, and the readers check them, so an interrupted set is recognised rather than
+  mixed.
 
 The overwrite check runs again at the commit: two writers into one new folder never replace
 each other silently.  Existing outputs must be regular files (a symbolic link, a device node or
@@ -31,8 +32,10 @@ a folder in an output's place is refused, never written through).  A set written
 ``overwrite`` replaces the whole previous set: an output left out this time (``--no-report``)
 does not stay behind from the earlier run.
 
-Kill the process at any point and the folder holds the old complete set or the new complete set
-(plus, at worst, a hidden staging folder, removed by the next writer into the same parent).
+Kill the process at any point and a folder of the first two kinds holds the old complete set or
+the new complete set (plus, at worst, a hidden staging folder, removed by the next writer into
+the same parent).  In a folder of the third kind a kill during the moves (milliseconds) leaves
+it without map.json, which every reader refuses as incomplete; a rerun writes the whole set.
 """
 
 from __future__ import annotations
@@ -190,6 +193,15 @@ def _clean_stale(where: Path, prefix: str) -> None:
                 shutil.rmtree(entry, ignore_errors=True)
 
 
+def _holds_cwd(folder: Path) -> bool:
+    """True when the working directory is ``folder`` or inside it."""
+    try:
+        cwd = os.getcwd()
+    except OSError:
+        return False
+    return os.path.commonpath([cwd, str(folder)]) == str(folder)
+
+
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -228,8 +240,11 @@ class OutputSet:
         self.check()
         target = Path(os.path.abspath(self.folder))
         # beside the target when the whole folder may be swapped in; inside it when it also
-        # holds other files (only the files move then)
-        inside = self.folder.is_dir() and bool(self._foreign())
+        # holds other files, or holds the working directory (only the files move then: a
+        # process working in the old folder would be left in a deleted one)
+        self._keep_folder = self.folder.is_dir() and (bool(self._foreign()) or
+                                                      _holds_cwd(target))
+        inside = self._keep_folder
         where = target if inside else target.parent
         prefix = STAGE_PREFIX if inside else f".{target.name}{STAGE_PREFIX}"
         try:
@@ -324,7 +339,7 @@ class OutputSet:
         self.check()
         inside = self.stage.parent == Path(os.path.abspath(self.folder))
         if not inside and not self._foreign() and not self.folder.is_symlink() and \
-                self._swap():
+                not _holds_cwd(Path(os.path.abspath(self.folder))) and self._swap():
             self.committed = True
             return
         self._move_in()
