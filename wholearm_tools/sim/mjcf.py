@@ -216,8 +216,10 @@ def _surface_sphere(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
 
 
 def _post_or_bore(obs: Any, k: int, ctx: _Context, point: FloatArray, axis: FloatArray,
-                  radius: float, s_range: tuple[float, float]) -> list[_Geom]:
-    """A solid post (free outside) as a cylinder, a bore (free inside) as tiles."""
+                  radius: float, s_range: tuple[float, float], caps: bool = True
+                  ) -> list[_Geom]:
+    """A solid post (free outside) as a cylinder, a bore (free inside) as tiles (with its
+    closed ends when ``caps``; the ends of an extruded 2-D circle are not surfaces)."""
     s0, s1 = s_range
     if not np.isfinite(s0) or not np.isfinite(s1):
         # an open end: cut the cylinder where the robot cannot reach
@@ -229,7 +231,7 @@ def _post_or_bore(obs: Any, k: int, ctx: _Context, point: FloatArray, axis: Floa
     if obs.free_side > 0:
         centre = point + 0.5 * (s0 + s1) * axis
         return [_cylinder(centre, axis, radius, 0.5 * (s1 - s0), ctx.row_of(k))]
-    return _tile_cylinder(obs, ctx, point, axis, radius, (s0, s1), ctx.row_of(k))
+    return _tile_cylinder(obs, ctx, point, axis, radius, (s0, s1), ctx.row_of(k), caps)
 
 
 def _surface_cylinder(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
@@ -240,7 +242,7 @@ def _surface_cylinder(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
 def _surface_circle(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
     c = obs.primitive
     return _post_or_bore(obs, k, ctx, _lift(c.center) - [0, 0, ctx.height], np.array(
-        [0.0, 0.0, 1.0]), c.radius, (0.0, 2 * ctx.height))
+        [0.0, 0.0, 1.0]), c.radius, (0.0, 2 * ctx.height), caps=False)
 
 
 def _cylinder_section(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
@@ -255,7 +257,8 @@ def _arc(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
         raise PhysicsModelError(f"obstacle {k}: an arc with an angle range is not supported by "
                                 "the physics engine")
     return _post_or_bore(obs, k, ctx, _lift(obs.center) - [0, 0, ctx.height],
-                         np.array([0.0, 0.0, 1.0]), obs.radius, (0.0, 2 * ctx.height))
+                         np.array([0.0, 0.0, 1.0]), obs.radius, (0.0, 2 * ctx.height),
+                         caps=False)
 
 
 def _deep(thickness: float | None, ctx: _Context) -> float:
@@ -319,7 +322,8 @@ def _clearance_3d(obs: Any) -> Callable[[FloatArray], FloatArray]:
 
 
 def _tile_cylinder(obs: Any, ctx: _Context, point: FloatArray, axis: FloatArray,
-                   radius: float, s_range: tuple[float, float], surface: int) -> list[_Geom]:
+                   radius: float, s_range: tuple[float, float], surface: int,
+                   caps: bool = True) -> list[_Geom]:
     """Tiles of the wall of a bore (free inside) and of its end caps, where the robot reaches.
 
     Only wall points where the obstacle's own clearance is zero are wall: a junction's points
@@ -350,7 +354,7 @@ def _tile_cylinder(obs: Any, ctx: _Context, point: FloatArray, axis: FloatArray,
 
     tiles += _tile_patch(wall, (0.0, 2 * np.pi), (s0, s1), n_ang, n_ax, clear, ctx, surface)
     for end, sign in ((float(s_range[0]), -1.0), (float(s_range[1]), 1.0)):
-        if not np.isfinite(end) or not (t_base - near <= end <= t_base + near):
+        if not caps or not np.isfinite(end) or not (t_base - near <= end <= t_base + near):
             continue
 
         def cap(u: FloatArray, r: FloatArray, end: float = end, sign: float = sign
@@ -421,15 +425,17 @@ def _tile_patch(param: Callable[[FloatArray, FloatArray], tuple[FloatArray, Floa
             return None
         return (V, hull) if hull.volume > 1e-12 else None
 
-    def cell(u0: float, u1: float, v0: float, v1: float, level: int) -> None:
+    def cell(u0: float, u1: float, v0: float, v1: float, level: int) -> bool:
+        """Tile one cell (halving it where needed); True when it is a whole-wall cell that
+        :func:`merge` may join with its neighbours along ``v`` (nothing emitted yet)."""
         nonlocal worst
         uu, vv = u0 + gu * (u1 - u0), v0 + gv * (v1 - v0)
         P, _ = param(uu, vv)
         if np.min(np.linalg.norm(P - ctx.base, axis=1)) > ctx.reach + 0.05 + np.ptp(P, 0).max():
-            return
+            return False
         on = on_wall(P)
         if not on.any():
-            return
+            return False
         # smaller cells are thinner too: where the material is a wedge (a lip), a deep hull
         # would reach across the other bore's free space
         depth = max(opts.thickness / 2**level, min(opts.thickness, 0.004))
@@ -446,17 +452,49 @@ def _tile_patch(param: Callable[[FloatArray, FloatArray], tuple[FloatArray, Floa
             for a, b in ((u0, um), (um, u1)):
                 for c, d in ((v0, vm), (vm, v1)):
                     cell(a, b, c, d, level + 1)
-            return
-        if built is not None:
-            worst = max(worst, deviation)
-            tiles.append(_Geom({"type": "mesh"}, surface, built[0][built[1].vertices]))
+            return False
+        if built is None:
+            return False
+        worst = max(worst, deviation)
+        if level == 0 and on.all():
+            return True
+        tiles.append(_Geom({"type": "mesh"}, surface, built[0][built[1].vertices]))
+        return False
+
+    def merge(u0: float, u1: float, v0: float, v1: float) -> bool:
+        """One tile for a run of whole-wall cells along ``v`` (a straight stave of a cylinder,
+        a strip of a flat cap), if it deviates no more than its cells."""
+        nonlocal worst
+        uu, vv = u0 + gu * (u1 - u0), v0 + gv * (v1 - v0)
+        built = tile(uu, vv, np.ones(len(uu), dtype=bool), opts.thickness)
+        if built is None:
+            return False
+        deviation = _hull_intrusion(*built, clear)
+        if deviation > opts.max_deviation:
+            return False
+        worst = max(worst, deviation)
+        tiles.append(_Geom({"type": "mesh"}, surface, built[0][built[1].vertices]))
+        return True
 
     du = (u_range[1] - u_range[0]) / n_u
     dv = (v_range[1] - v_range[0]) / n_v
     for i in range(n_u):
-        for j in range(n_v):
-            cell(u_range[0] + i * du, u_range[0] + (i + 1) * du, v_range[0] + j * dv,
-                 v_range[0] + (j + 1) * dv, 0)
+        u0, u1 = u_range[0] + i * du, u_range[0] + (i + 1) * du
+        whole = [cell(u0, u1, v_range[0] + j * dv, v_range[0] + (j + 1) * dv, 0)
+                 for j in range(n_v)]
+        j = 0
+        while j < n_v:
+            if not whole[j]:
+                j += 1
+                continue
+            end = j
+            while end + 1 < n_v and whole[end + 1]:
+                end += 1
+            v0, v1 = v_range[0] + j * dv, v_range[0] + (end + 1) * dv
+            if not merge(u0, u1, v0, v1):
+                for jj in range(j, end + 1):  # emit the cells one by one
+                    merge(u0, u1, v_range[0] + jj * dv, v_range[0] + (jj + 1) * dv)
+            j = end + 1
     ctx.deviation[surface] = max(ctx.deviation.get(surface, 0.0), worst)
     return tiles
 
@@ -522,7 +560,7 @@ def build_scene(robot: RobotModel, obstacles: Sequence[Any], options: SceneOptio
     ET.SubElement(root, "compiler", angle="radian", autolimits="true")
     ET.SubElement(root, "option", timestep=_f(options.timestep),
                   gravity="0 0 -9.81" if options.gravity else "0 0 0",
-                  integrator="implicitfast", cone="elliptic")
+                  integrator="implicitfast", cone="elliptic", impratio="10")
     default = ET.SubElement(root, "default")
     ET.SubElement(default, "geom", friction=_f([options.friction, 0.005, 0.0001]),
                   solref=_f(options.solref), condim="3")

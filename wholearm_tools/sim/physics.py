@@ -78,6 +78,8 @@ FloatArray = NDArray[np.float64]
 ENGINES = ("kinematic", "physics")
 """Simulation engines ``wholearm simulate --engine`` accepts."""
 
+KEY_STRIDE = 1 << 20  # contact pair key = link * KEY_STRIDE + surface id
+
 REBOUND_GAP = 5e-4
 """A contact that opens wider than this [m] and closes again within its event rebounded (the
 soft contact's own flutter about zero penetration does not count)."""
@@ -115,7 +117,7 @@ class Physics:
     lead: float = 1.0
     settle_time: float = 0.05
     rest_speed: float = 0.02
-    release_time: float = 0.03
+    release_time: float = 0.1
     max_deviation: float = 3e-4
 
     def __post_init__(self) -> None:
@@ -226,6 +228,9 @@ class _Rig:
         for name, sid in self.scene.env_geoms.items():
             self.geom_surface[m.geom(name).id] = sid
         self.body_ids = np.array([m.body(f"link{i}").id for i in range(n)])
+        self._geom_link = self.geom_link.tolist()
+        self._geom_surface = self.geom_surface.tolist()
+        self.planar = robot.planar
         self.tip_site = m.site("tip").id
         # encoders
         self.quantum = 2.0 * np.pi / sensors.counts_per_rev
@@ -237,6 +242,7 @@ class _Rig:
         self._hist = np.repeat(self._measure()[None], self.window + 1, axis=0)
         self._hist_i = 0
         self.q_m = self._hist[0].copy()
+        self.q_ref = np.array(home, dtype=float)  # last reference sent
         self.qd_m = np.zeros(n)
         self.step_i = 0
         self.rest = np.zeros(n)  # joint speeds below which the supervisor sees a joint at rest
@@ -278,6 +284,7 @@ class _Rig:
         if self.gravity:
             tau += self._gravity_torque(q_m)
         tau = np.minimum(np.maximum(tau, -self.effort), self.effort)
+        self.q_ref = q_ref
         if self.step_i % self.substeps == 0 and not self.log.full:
             lg, k = self.log, self.log.k
             lg.q_meas[k], lg.q_ref[k], lg.tau[k] = q_m, q_ref, tau
@@ -303,87 +310,105 @@ class _Rig:
 
     # ------------------------------------------------------------------ ground truth
     def _contacts(self) -> None:
+        """Contact events from this step's contact list (plain Python: a handful of contacts
+        per step, where numpy's per-call cost would dominate)."""
         d = self.data
+        ncon = d.ncon
+        if not ncon and not self.active:
+            return
         t = self.t
-        # (link, surface) -> (distance, normal force, surface point, kind, s) of its deepest point
-        seen: dict[tuple[int, int], tuple[float, float, FloatArray, str, float]] = {}
-        if d.ncon:
+        # key -> (distance, contact index, robot geom, robot is geom1) of its deepest point
+        deepest: dict[int, tuple[float, int, int, bool]] = {}
+        force: dict[int, float] = {}
+        if ncon:
             con = d.contact
-            g1, g2 = con.geom1, con.geom2
-            link1, link2 = self.geom_link[g1], self.geom_link[g2]
-            surf1, surf2 = self.geom_surface[g1], self.geom_surface[g2]
-            robot_first = link1 >= 0
-            rel = np.flatnonzero((robot_first & (surf2 >= 0)) | ((link2 >= 0) & (surf1 >= 0)))
-            if rel.size:
-                adr = con.efc_address[rel]
-                force = np.where(adr >= 0, d.efc_force[np.maximum(adr, 0)], 0.0)
-                dist = con.dist[rel]
-                pts = self._joint_points()
-                for j, c in enumerate(rel.tolist()):
-                    rf = bool(robot_first[c])
-                    geom = int(g1[c] if rf else g2[c])
-                    surface = int(surf2[c] if rf else surf1[c])
-                    # the contact position is midway between the surfaces; the normal points
-                    # from geom1 to geom2
-                    half = (0.5 * float(dist[j])) * con.frame[c, :3]
-                    p_env = con.pos[c] + half if rf else con.pos[c] - half
-                    link, kind, s = self._where(geom, con.pos[c], pts)
-                    key = (link, surface)
-                    depth, f = float(dist[j]), float(force[j])
-                    prev = seen.get(key)
-                    if prev is None:
-                        seen[key] = (depth, f, p_env, kind, s)
-                    elif depth < prev[0]:
-                        seen[key] = (depth, prev[1] + f, p_env, kind, s)
-                    else:
-                        seen[key] = (prev[0], prev[1] + f, prev[2], prev[3], prev[4])
-        for key, (depth, f, p, kind, s) in seen.items():
+            gl, gs = self._geom_link, self._geom_surface
+            g1, g2 = con.geom1.tolist(), con.geom2.tolist()
+            dist = con.dist.tolist()
+            pos = None
+            for c in range(ncon):
+                a, b = g1[c], g2[c]
+                if gl[a] >= 0 and gs[b] >= 0:
+                    geom, surf, rf = a, gs[b], True
+                elif gl[b] >= 0 and gs[a] >= 0:
+                    geom, surf, rf = b, gs[a], False
+                else:
+                    continue
+                if pos is None:
+                    pos = con.pos.tolist()
+                    pts = self._joint_points()
+                link, _, _ = self._where(geom, pos[c], pts)
+                key = link * KEY_STRIDE + surf
+                dc = dist[c]
+                prev = deepest.get(key)
+                if prev is None or dc < prev[0]:
+                    deepest[key] = (dc, c, geom, rf)
+                if dc < 0.0:
+                    adr = int(con.efc_address[c])
+                    force[key] = force.get(key, 0.0) + (float(d.efc_force[adr]) if adr >= 0
+                                                        else 0.0)
+        for key, (dc, c, geom, rf) in deepest.items():
             ev = self.active.get(key)
-            if depth >= 0.0:  # near but not touching
-                if ev is not None and depth > REBOUND_GAP:
+            if dc >= 0.0:
+                if ev is not None and dc > REBOUND_GAP:
                     ev.apart = True
                 continue
-            p = p.copy()
-            if self.robot.planar:
+            # the contact position is midway between the surfaces; the normal points from
+            # geom1 to geom2
+            half = (0.5 if rf else -0.5) * dc
+            p = np.array(pos[c]) + half * con.frame[c, :3]
+            if self.planar:
                 p[2] = 0.0
+            _, kind, s = self._where(geom, pos[c], pts)
+            f = force.get(key, 0.0)
             if ev is None:
-                ev = _Event(key[0], key[1], t, t, p, p, kind, s, self.data.qpos.copy(), f)
+                ev = _Event(key // KEY_STRIDE, key % KEY_STRIDE, t, t, p, p, kind, s,
+                            d.qpos.copy(), f)
                 self.active[key] = ev
                 self.events.append(ev)
                 continue
             if ev.apart:
                 ev.rebounds += 1
                 ev.apart = False
-            ev.path += float(np.linalg.norm(p - ev.point))
-            ev.max_shift = max(ev.max_shift, float(np.linalg.norm(p - ev.point_first)))
+            step = p - ev.point
+            ev.path += float(np.sqrt(step @ step))
+            shift = p - ev.point_first
+            ev.max_shift = max(ev.max_shift, float(np.sqrt(shift @ shift)))
             ev.t_last, ev.point, ev.kind, ev.s = t, p, kind, s
-            ev.q = self.data.qpos.copy()
+            ev.q = d.qpos.copy()
             ev.force = max(ev.force, f)
         for key in [k for k, ev in self.active.items() if ev.t_last < t]:
             ev = self.active[key]
-            if key not in seen:
-                ev.apart = True  # farther than the contact margin
+            if key not in deepest:
+                ev.apart = True  # farther apart than the contact list's margin
             if t - ev.t_last > self.release_time:
                 del self.active[key]
 
-    def _joint_points(self) -> FloatArray:
+    def _joint_points(self) -> list[list[float]]:
+        """Joint origins and the tip point, as lists."""
         d = self.data
-        return np.vstack([d.xpos[self.body_ids], d.site_xpos[self.tip_site][None]])
+        return [*d.xpos[self.body_ids].tolist(), d.site_xpos[self.tip_site].tolist()]
 
-    def _where(self, geom: int, pos: FloatArray, pts: FloatArray) -> tuple[int, str, float]:
-        """Link, kind and fraction along the link of a robot contact at ``pos``."""
-        n = self.n
-        link = int(self.geom_link[geom])
+    def _where(self, geom: int, pos: list[float], pts: list[list[float]]
+               ) -> tuple[int, str, float]:
+        """Link, kind and fraction along the link of a robot contact on ``geom`` at ``pos``:
+        a point beyond the outer end of a link is on its joint sphere (the tip for the last
+        link); a point before the inner end of link ``i > 0`` lies inside the larger joint
+        sphere of link ``i - 1``."""
+        link = self._geom_link[geom]
         if geom == self.tip_geom:
             return link, "tip", 1.0
         a, b = pts[link], pts[link + 1]
-        ab = b - a
-        L2 = float(ab @ ab)
-        s = float((pos - a) @ ab / L2) if L2 > 0 else 1.0
+        ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+        L2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]
+        if L2 <= 0.0:
+            s = 1.0
+        else:
+            s = ((pos[0] - a[0]) * ab[0] + (pos[1] - a[1]) * ab[1]
+                 + (pos[2] - a[2]) * ab[2]) / L2
         if s >= 1.0:
-            return link, ("tip" if link == n - 1 else "joint"), 1.0
+            return link, ("tip" if link == self.n - 1 else "joint"), 1.0
         if s <= 0.0 and link > 0:
-            # the inner round end lies inside the inner link's larger joint sphere
             return link - 1, "joint", 1.0
         return link, "body", max(s, 0.0)
 
@@ -477,7 +502,7 @@ def simulate_physics(
             still = still + 1 if rig.at_rest else 0
 
     while not rig.log.full:
-        q = rig.q_m.copy()
+        q = rig.q_m.copy()  # the strategy sees the encoders
         target = strat.next_target(q)
         if target is None:
             idle += 1
@@ -486,23 +511,29 @@ def simulate_physics(
             continue
         idle = 0
         t0 = rig.t
-        delta = target - q
+        q_from = rig.q_ref.copy()  # the plan continues from the last reference
+        delta = target - q_from
         law = synchronised_law(delta, vmax, amax)
         T = law.duration
         timeout = T + 2.0 + float(np.max(rig.lead / np.maximum(vmax, 1e-9)))
         path = [q.copy()]
         still = 0
-        tau = 0.0
+        # the plan at every physics step (it stays at the target after T)
+        s_plan, sd_plan = law(np.arange(int(np.ceil(T / rig.dt)) + 2) * rig.dt)
+        q_plan = q_from + s_plan[:, None] * delta
+        qd_plan = sd_plan[:, None] * delta
+        last = len(s_plan) - 1
+        i = 0
         while not rig.log.full:
-            s, sd = law(tau)
-            held = rig.step(q + s * delta, sd * delta)
-            tau += rig.dt
+            j = min(i, last)
+            held = rig.step(q_plan[j], qd_plan[j])
+            i += 1
             if rig.step_i % sample_every == 0:
                 path.append(rig.q_m.copy())
             still = still + 1 if rig.at_rest else 0
-            if still >= settle_steps and (tau >= T or held):
+            if still >= settle_steps and (i >= last or held):
                 break
-            if tau > timeout:
+            if i * rig.dt > timeout:
                 break
         q_stop = rig.q_m.copy()
         path.append(q_stop)
@@ -518,11 +549,12 @@ def simulate_physics(
             moves.append(Move(t0, t_stop, t_stop, t_stop, q, target, ()))
         else:
             stopped = rig.mark_stopped()
-            t_dwell = rig.t + controller.dwell
-            while not rig.log.full and rig.t < t_dwell:
-                s, sd = law(tau)
-                rig.step(q + s * delta, sd * delta)
-                tau += rig.dt
+            for _ in range(round(controller.dwell / rig.dt)):
+                if rig.log.full:
+                    break
+                j = min(i, last)
+                rig.step(q_plan[j], qd_plan[j])
+                i += 1
             swept = densify(vertices, sweep_step, max_lever)
             grid.mark(swept)
             # the supervisor's view: joints within tolerance reached their target
@@ -531,19 +563,19 @@ def simulate_physics(
             t_retreat = rig.t
             back = _retreat_vertices(collider, vertices, controller)
             retreat = PolylinePath.build(back, vmax, controller.t_acc)
-            tr = 0.0
-            while not rig.log.full and tr <= retreat.duration:
-                qr, qdr = retreat.sample(np.array([tr]))
-                rig.step(qr[0], qdr[0])
-                tr += rig.dt
+            qr, qdr = retreat.sample(np.arange(int(retreat.duration / rig.dt) + 1) * rig.dt)
+            for j in range(len(qr)):
+                if rig.log.full:
+                    break
+                rig.step(qr[j], qdr[j])
             hold_until_rest(back[-1], 0.5)
             ids = tuple(sorted(id(ev) for ev in stopped))
             moves.append(Move(t0, t_stop, t_retreat, rig.t, q, target, ids))
         if progress is not None:
             progress(min(rig.t, duration), duration)
 
-    while not rig.log.full:  # the strategy gave up: hold still
-        rig.step(rig.q_m.copy(), np.zeros(n))
+    while not rig.log.full:  # the strategy gave up: hold the last reference
+        rig.step(rig.q_ref.copy(), np.zeros(n))
 
     return _result(robot, collider, rig, strat, moves, controller, sensors, physics, rate,
                    duration, seed, meta, progress, wall0)
