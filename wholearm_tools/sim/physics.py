@@ -159,6 +159,7 @@ class _Event:
     rebounds: int = 0
     path: float = 0.0  # distance the contact point travelled
     max_shift: float = 0.0  # farthest the contact point got from where it first touched
+    depth: float = 0.0  # deepest penetration of the soft contact
     apart: bool = False
     stopped: bool = False
     settled: tuple[FloatArray, str, float, FloatArray] | None = None
@@ -363,7 +364,7 @@ class _Rig:
             f = force.get(key, 0.0)
             if ev is None:
                 ev = _Event(key // KEY_STRIDE, key % KEY_STRIDE, t, t, p, p, kind, s,
-                            d.qpos.copy(), f)
+                            d.qpos.copy(), f, depth=-dc)
                 self.active[key] = ev
                 self.events.append(ev)
                 continue
@@ -377,6 +378,7 @@ class _Rig:
             ev.t_last, ev.point, ev.kind, ev.s = t, p, kind, s
             ev.q = d.qpos.copy()
             ev.force = max(ev.force, f)
+            ev.depth = max(ev.depth, -dc)
         for key in [k for k, ev in self.active.items() if ev.t_last < t]:
             ev = self.active[key]
             if key not in deepest:
@@ -447,7 +449,8 @@ def simulate_physics(
     SimResult
         ``run`` in the kinematic engine's log profile, ground truth one row per contact event;
         ``stats`` adds ``events`` (per event: ``rebounds``, ``slide`` = farthest the contact
-        point got from where it first touched [m], ``path`` = distance it travelled [m]) and the
+        point got from where it first touched [m], ``path`` = distance it travelled [m],
+        ``depth`` = deepest penetration of the soft contact [m]) and the
         scene (``tiles``, ``deviation`` per surface, ``mjcf`` text).
     """
     wall0 = time.perf_counter()
@@ -633,7 +636,8 @@ def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
         "physics_steps": rig.step_i,
         "events": {"rebounds": np.array([ev.rebounds for ev in events], dtype=np.int64),
                    "slide": np.array([ev.max_shift for ev in events], dtype=float),
-                   "path": np.array([ev.path for ev in events], dtype=float)},
+                   "path": np.array([ev.path for ev in events], dtype=float),
+                   "depth": np.array([ev.depth for ev in events], dtype=float)},
     }
     return SimResult(
         run=run, q_true=_ro(lg.q_true), qd_true=_ro(lg.qd_true),
