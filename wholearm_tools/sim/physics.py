@@ -521,6 +521,7 @@ def simulate_physics(
         timeout = T + 2.0 + float(np.max(rig.lead / np.maximum(vmax, 1e-9)))
         path = [q.copy()]
         still = 0
+        at_rest = False
         # the plan at every physics step (it stays at the target after T)
         s_plan, sd_plan = law(np.arange(int(np.ceil(T / rig.dt)) + 2) * rig.dt)
         q_plan = q_from + s_plan[:, None] * delta
@@ -534,9 +535,10 @@ def simulate_physics(
             if rig.step_i % sample_every == 0:
                 path.append(rig.q_m.copy())
             still = still + 1 if rig.at_rest else 0
-            if still >= settle_steps and (i >= last or held):
+            at_rest = still >= settle_steps
+            if at_rest and (i >= last or held):
                 break
-            if i * rig.dt > timeout:
+            if i * rig.dt > timeout:  # still sliding: the supervisor gives up on the move
                 break
         q_stop = rig.q_m.copy()
         path.append(q_stop)
@@ -551,7 +553,9 @@ def simulate_physics(
             strat.observe(swept, None)
             moves.append(Move(t0, t_stop, t_stop, t_stop, q, target, ()))
         else:
-            stopped = rig.mark_stopped()
+            # contacts the arm came to rest against stopped it; after a timeout it was still
+            # moving (sliding), and nothing stopped it
+            stopped = rig.mark_stopped() if at_rest else []
             for _ in range(round(controller.dwell / rig.dt)):
                 if rig.log.full:
                     break
