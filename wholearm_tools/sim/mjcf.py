@@ -21,9 +21,13 @@ and of the same points pushed ``thickness`` into the material; cells crossing th
 wall (a junction's lip: wall points inside the other bore are free space, not wall) are halved
 down to a smallest size, and their hull is taken over the wall points plus the edge itself,
 found by bisection along the cell's sample lines.  Points pushed into the material are pulled
-back until they are in the material (at an acute lip the material is a thin wedge).  Tile
-vertices lie on the ideal surface, so the simulated solid sticks into the ideal free space by
-at most the sagitta of a cell; the angular cell size keeps it below ``max_deviation``.  The
+back until they are in the material, and smaller cells are thinner (at an acute lip the
+material is a thin wedge, and a deep hull would reach across the other bore).  Any cell whose
+hull deviates more than ``max_deviation`` is halved again; runs of whole cells are merged
+along the wall into one stave when the merged hull deviates no more (fewer geoms: the broad
+phase and the kinematics cost grow with their number).  Tile vertices lie on the ideal
+surface, so the simulated solid sticks into the ideal free space by at most the sagitta of a
+cell; the angular cell size keeps it below ``max_deviation``.  The
 measured deviation of every tiled surface (largest clearance of a point on a tile face: solid
 in ideal free space; largest depth of an ideal wall point no tile covers: free space the ideal
 does not have) is returned with the scene and recorded in the ground truth.

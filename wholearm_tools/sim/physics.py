@@ -41,9 +41,11 @@ Every physics step lists the engine's contacts between a robot geom and an envir
 groups them by (link, surface): the deepest point gives the contact point on the surface and the
 fraction ``s`` along the link (a point on a link's outer round end is a ``joint`` contact, the
 tip's a ``tip`` contact), the normal forces add up.  A contact *event* runs from first touch
-until the pair has been apart for ``release_time``; a shorter separation is a rebound within the
-event.  An event that is in contact when a blocked move comes to rest *stopped the arm*: its
-settled point, kind and configuration are taken there; a graze keeps those of its last touch.
+until the pair has been apart for ``release_time``; within it, opening wider than
+:data:`REBOUND_GAP` and touching again is a rebound (environment geoms list pairs within a
+millimetre as inactive contacts, so the gap is known).  An event that is in contact when a
+blocked move comes to rest *stopped the arm*: its settled point, kind and configuration are
+taken there; a graze keeps those of its last touch.
 """
 
 from __future__ import annotations
@@ -249,7 +251,7 @@ class _Rig:
         self.rest = np.zeros(n)  # joint speeds below which the supervisor sees a joint at rest
         self.release_time = physics.release_time
         self.events: list[_Event] = []
-        self.active: dict[tuple[int, int], _Event] = {}
+        self.active: dict[int, _Event] = {}  # by pair key (see KEY_STRIDE)
         self.log = _Log(np.zeros((n_samples, n)), np.zeros((n_samples, n)),
                         np.zeros((n_samples, n)), np.zeros((n_samples, n)),
                         np.zeros((n_samples, n)))
