@@ -69,11 +69,11 @@ def spatial_arm() -> RobotModel:
     }, name="spatial3")
 
 
-def options(robot: RobotModel) -> SceneOptions:
+def options(robot: RobotModel, max_deviation: float = 3e-4) -> SceneOptions:
     n = robot.dof
     return SceneOptions(timestep=1e-3, gravity=False, friction=0.4, solref=(0.005, 0.7),
                         density=1000.0, armature=(0.01,) * n, frictionloss=(0.0,) * n,
-                        damping=(0.1,) * n)
+                        damping=(0.1,) * n, max_deviation=max_deviation)
 
 
 @pytest.mark.parametrize("robot", [two_link(), spatial_arm()], ids=["planar", "spatial"])
@@ -290,3 +290,111 @@ def test_scenario_physics_block(tmp_path: Path) -> None:
     bad.write_text(text + "physics: {frictoin: 0.1}\n")
     with pytest.raises(ScenarioError, match=r"bad\.yaml: invalid scenario.*frictoin"):
         load_scenario(bad)
+
+
+def scene_distances(robot: RobotModel, obstacles: list, points: np.ndarray,
+                    farthest: float = 5.0, scene=None) -> np.ndarray:
+    """Distance from each point to the nearest environment geom of the (built) scene,
+    measured by MuJoCo with a tiny probe sphere (up to ``farthest``), ``(N,)``."""
+    import mujoco
+
+    scene = scene or build_scene(robot, obstacles, options(robot))
+    probe = ('<body name="probe" mocap="true"><geom name="probe" type="sphere" size="1e-4" '
+             'contype="0" conaffinity="0"/></body>')
+    xml = scene.xml.replace("</worldbody>", probe + "</worldbody>")
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    env = [model.geom(name).id for name in scene.env_geoms]
+    out = []
+    for p in points:
+        data.mocap_pos[0] = np.r_[p, 0.0][:3]
+        mujoco.mj_kinematics(model, data)
+        out.append(min(mujoco.mj_geomDistance(model, data, model.geom("probe").id, g,
+                                              farthest, None) for g in env) + 1e-4)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("case", ["spatial", "planar"])
+def test_scene_geoms_reproduce_the_obstacles_clearance(case: str) -> None:
+    """Away from the surfaces (where MuJoCo's distances are exact), each built geom is where
+    its obstacle's material is: the scene's distance equals the obstacles' clearance."""
+    from wholearm_tools.geometry import CylinderSection, PlanePatch, Segment2D
+
+    rng = np.random.default_rng(5)
+    if case == "spatial":
+        robot = spatial_arm()
+        obstacles = [
+            Surface(Plane([0, 0, -0.3], [0, 0, 1]), free_side=1, surface_id=0),
+            CylinderSection([0.4, 0.1, -0.3], [0, 0, 1], 0.06, (0.0, 0.5), free_side=1,
+                            surface_id=1),
+            Surface(Sphere([-0.3, 0.3, 0.2], 0.1), free_side=1, surface_id=2),
+            PlanePatch([0.0, -0.5, 0.1], [0, 1, 0], [1, 0, 0], (0.2, 0.15), free_side=-1,
+                       thickness=0.05, surface_id=3),
+        ]
+        points = rng.uniform([-0.7, -0.7, -0.25], [0.7, 0.7, 0.5], size=(300, 3))
+    else:
+        robot = two_link()
+        obstacles = [
+            Surface(Line2D([0.0, 0.5], [1.0, 0.0]), free_side=-1, surface_id=0),
+            Arc2D([0.3, 0.1], 0.05, free_side=1, surface_id=1),
+            Segment2D([-0.3, 0.0], [0.0, 1.0], (-0.2, 0.2), free_side=1, thickness=0.04,
+                      surface_id=2),
+        ]
+        points = rng.uniform([-0.6, -0.6], [0.6, 0.45], size=(300, 2))
+    clearance = np.min([obs.clearance(points) for obs in obstacles], axis=0)
+    free = clearance > 0.01
+    got = scene_distances(robot, obstacles, points[free])
+    np.testing.assert_allclose(got, clearance[free], atol=1e-6)
+
+
+def lip_curve(main, branch, samples: int = 360) -> np.ndarray:
+    """Points where the branch wall meets the main wall (bisection along the branch wall)."""
+    from wholearm_tools.geometry.base import perpendicular
+
+    e1 = np.asarray(perpendicular(branch.axis))
+    e2 = np.cross(branch.axis, e1)
+    out = []
+    for phi in np.linspace(0.0, 2 * np.pi, samples, endpoint=False):
+        radial = branch.radius * (np.cos(phi) * e1 + np.sin(phi) * e2)
+        lo, hi = 0.0, 2.0  # inside the main bore at 0, outside far along the branch
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            v = branch.point + mid * branch.axis + radial - main.point
+            rho = np.linalg.norm(v - (v @ main.axis) * main.axis)
+            lo, hi = (mid, hi) if rho < main.radius else (lo, mid)
+        out.append(branch.point + lo * branch.axis + radial)
+    return np.array(out)
+
+
+def test_a_tiled_junction_stays_within_its_deviation_of_the_ideal_bores() -> None:
+    """Inside a junction of two bores the tiles never come closer than the ideal walls minus
+    the measured deviation (which is within the requested one), and away from the lip, where
+    the ideal clearance is exact, they are no farther either."""
+    from wholearm_tools.geometry import Cylinder, CylinderJunction
+
+    robot = RobotModel.from_spec({  # a short arm: only what it reaches is tiled
+        "joints": [{"name": "yaw", "origin": [0, 0, 0.2], "radius": 0.03},
+                   {"name": "pitch", "origin": [0, 0, 0.05], "axis": [0, 1, 0],
+                    "radius": 0.02}],
+        "tip": {"offset": [0.2, 0.0, 0.0], "radius": 0.02}}, name="short")
+    main = Cylinder([0, 0, 0.3], [0, 0, 1], 0.14)
+    branch = Cylinder([0, 0, 0.3], [0.7071, 0, 0.7071], 0.09)
+    junction = CylinderJunction(main, branch, (-0.6, 0.6), (0.0, 0.6))
+    scene = build_scene(robot, [junction], options(robot, max_deviation=1e-3))
+    dev = max(scene.deviation.values())
+    assert scene.tiles > 0
+    assert set(scene.deviation) == {0, 1}
+    assert dev <= 1e-3
+    rng = np.random.default_rng(8)
+    points = rng.uniform([-0.15, -0.15, 0.0], [0.45, 0.15, 0.6], size=(3000, 3))
+    clearance = junction.clearance(points)
+    near = (clearance > 0.003) & (clearance < 0.05)
+    near &= np.linalg.norm(points - robot.base, axis=1) < robot.reach
+    points, clearance = points[near][:120], clearance[near][:120]
+    got = scene_distances(robot, [junction], points, farthest=0.06, scene=scene)
+    assert np.all(got >= clearance - dev - 1e-6)  # no tile inside the ideal free space
+    lip = lip_curve(main, branch)
+    from_lip = np.min(np.linalg.norm(points[:, None] - lip[None], axis=2), axis=1)
+    away = from_lip > clearance + 0.02
+    assert away.sum() > 30
+    np.testing.assert_allclose(got[away], clearance[away], atol=dev + 1e-6)

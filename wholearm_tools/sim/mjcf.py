@@ -283,7 +283,7 @@ def _segment2d(obs: Any, k: int, ctx: _Context) -> list[_Geom]:
     d = _lift(obs.direction)
     s0, s1 = obs.s_range
     centre = _lift(obs.point) + 0.5 * (s0 + s1) * d - 0.5 * depth * n
-    axes = np.stack([d, np.array([0.0, 0.0, 1.0]), n])
+    axes = np.stack([d, np.cross(n, d), n])  # right-handed; the second axis is +-z
     return [_box(centre, axes, np.array([0.5 * (s1 - s0), ctx.height, 0.5 * depth]),
                  ctx.row_of(k))]
 
@@ -409,7 +409,7 @@ def _tile_patch(param: Callable[[FloatArray, FloatArray], tuple[FloatArray, Floa
             b = np.where(on[cross[:, 0]], cross[:, 1], cross[:, 0])
             lo = np.stack([uu[a], vv[a]], axis=1)
             hi = np.stack([uu[b], vv[b]], axis=1)
-            for _ in range(30):
+            for _ in range(14):  # to 1e-4 of the cell: microns
                 mid = 0.5 * (lo + hi)
                 ok = on_wall(param(mid[:, 0], mid[:, 1])[0])[:, None]
                 lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
@@ -423,6 +423,8 @@ def _tile_patch(param: Callable[[FloatArray, FloatArray], tuple[FloatArray, Floa
             t = np.where(inside, t, 0.5 * t)
         t = np.where(clear(P + t[:, None] * N) < -eps, t, 0.0)
         V = np.vstack([P, P[t > 0] + t[t > 0, None] * N[t > 0]])
+        if len(V) < 4 or np.linalg.svd(V - V.mean(axis=0), compute_uv=False)[-1] < 1e-7:
+            return None  # flat or degenerate (Qhull would fail, slowly)
         try:
             hull = ConvexHull(V)
         except (QhullError, ValueError):
