@@ -7,7 +7,7 @@ kinematic engine's time for the same runs beside it.
 Columns (default physics parameters, the scenario's own settings otherwise):
   wall      wall time of the physics run [s] (target: 240 s of arm time in <= 60 s)
   kin       wall time of the kinematic engine on the same scenario, seed and duration [s]
-  moves     guarded moves of the physics run
+  moves     guarded moves of the physics run (kmoves: of the kinematic run)
   tip/joint/body  contact events by kind (where they settled)
   stop%     share of events that stopped the arm (blocked a commanded motion)
   dur       median event duration, first touch to release [s]
@@ -45,7 +45,7 @@ def main() -> None:
     names = args.scenarios or list_scenarios()
     print(f"{args.duration:.0f} s of arm time per run; load average before: "
           f"{os.getloadavg()[0]:.2f}", flush=True)
-    head = (f"{'scenario':<14}{'seed':>5}{'wall':>7}{'kin':>6}{'moves':>6}{'tip':>5}"
+    head = (f"{'scenario':<14}{'seed':>5}{'wall':>7}{'kin':>6}{'moves':>6}{'kmoves':>7}{'tip':>5}"
             f"{'joint':>6}{'body':>5}{'stop%':>6}{'dur':>6}{'slid':>5}{'rebound':>8}"
             f"{'F50':>7}{'pen':>6}{'dev':>6}")
     print(head)
@@ -58,10 +58,10 @@ def main() -> None:
             t0 = time.perf_counter()
             res = sc.simulate(engine="physics", seed=seed, duration=args.duration)
             wall = time.perf_counter() - t0
-            kin = float("nan")
+            kin, kmoves = float("nan"), -1
             if not args.no_kinematic:
                 t0 = time.perf_counter()
-                sc.simulate(seed=seed, duration=args.duration)
+                kmoves = len(sc.simulate(seed=seed, duration=args.duration).moves)
                 kin = time.perf_counter() - t0
             truth = res.truth
             ev = res.stats["events"]
@@ -72,7 +72,7 @@ def main() -> None:
             rebound = int(np.count_nonzero(ev["rebounds"] > 0))
             stopped = int(truth.contact_stopped.sum())
             dev = max(res.stats["deviation"].values(), default=0.0)
-            print(f"{name:<14}{seed:>5}{wall:>7.1f}{kin:>6.1f}{len(res.moves):>6}"
+            print(f"{name:<14}{seed:>5}{wall:>7.1f}{kin:>6.1f}{len(res.moves):>6}{kmoves:>7}"
                   f"{kinds.count('tip'):>5}{kinds.count('joint'):>6}{kinds.count('body'):>5}"
                   f"{100 * stopped / max(m, 1):>6.0f}"
                   f"{(np.median(dur) if m else float('nan')):>6.2f}{slid:>5}{rebound:>8}"

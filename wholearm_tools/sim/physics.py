@@ -242,6 +242,12 @@ class _Rig:
         self._noise = np.zeros((0, n))
         self._noise_i = 0
         self.window = sensors.velocity_window * self.substeps
+        self._per_count = 1.0 / self.quantum
+        self._per_window = 1.0 / (self.window * self.dt)
+        self._hist_len = self.window + 1
+        self._neg_effort = -self.effort
+        self._n_samples = n_samples
+        self._mj_step = mujoco.mj_step
         self._hist = np.repeat(self._measure()[None], self.window + 1, axis=0)
         self._hist_i = 0
         self.q_m = self._hist[0].copy()
@@ -262,42 +268,45 @@ class _Rig:
         return self.step_i * self.dt
 
     def _measure(self) -> FloatArray:
+        """Encoder reading of the true joint positions: Gaussian noise, then quantisation."""
         if self._noise_i >= self._noise.shape[0]:
             self._noise = self.rng.normal(0.0, self.noise_sd, size=(4096, self.n))
             self._noise_i = 0
         noisy = self.data.qpos + self._noise[self._noise_i]
         self._noise_i += 1
-        return np.round(noisy / self.quantum) * self.quantum
+        return np.round(noisy * self._per_count) * self.quantum
 
     def step(self, q_plan: FloatArray, qd_plan: FloatArray) -> bool:
         """One control period and physics step toward the planned ``q_plan``, ``qd_plan``;
-        returns whether the reference was held at its lead limit on some joint."""
-        mujoco = self.mujoco
+        returns whether the reference was held at its lead limit on some joint.  (Written
+        with few numpy calls: it runs at every physics step.)"""
         q_m = self._measure()
-        self._hist_i = (self._hist_i + 1) % (self.window + 1)
-        self._hist[self._hist_i] = q_m
-        oldest = self._hist[(self._hist_i + 1) % (self.window + 1)]
-        qd_m = (q_m - oldest) / (self.window * self.dt)
+        h = self._hist_i = (self._hist_i + 1) % self._hist_len
+        self._hist[h] = q_m
+        qd_m = (q_m - self._hist[(h + 1) % self._hist_len]) * self._per_window
         self.q_m, self.qd_m = q_m, qd_m
-        lo, hi = q_m - self.lead, q_m + self.lead
-        q_ref = np.minimum(np.maximum(q_plan, lo), hi)
-        held = q_ref != q_plan
-        qd_ref = np.where(held, 0.0, qd_plan)
-        tau = self.K * (q_ref - q_m) + self.D * (qd_ref - qd_m)
+        err = q_plan - q_m
+        held = bool((np.abs(err) > self.lead).any())
+        if held:
+            over = np.abs(err) > self.lead
+            err = np.minimum(np.maximum(err, -self.lead), self.lead)
+            qd_plan = np.where(over, 0.0, qd_plan)
+        q_ref = q_m + err if held else q_plan
+        tau = self.K * err + self.D * (qd_plan - qd_m)
         if self.gravity:
             tau += self._gravity_torque(q_m)
-        tau = np.minimum(np.maximum(tau, -self.effort), self.effort)
+        tau = np.minimum(np.maximum(tau, self._neg_effort), self.effort)
         self.q_ref = q_ref
-        if self.step_i % self.substeps == 0 and not self.log.full:
+        if self.step_i % self.substeps == 0 and self.log.k < self._n_samples:
             lg, k = self.log, self.log.k
             lg.q_meas[k], lg.q_ref[k], lg.tau[k] = q_m, q_ref, tau
             lg.q_true[k], lg.qd_true[k] = self.data.qpos, self.data.qvel
             lg.k += 1
         self.data.ctrl[:] = tau
-        mujoco.mj_step(self.model, self.data)
+        self._mj_step(self.model, self.data)
         self.step_i += 1
         self._contacts()
-        return bool(held.any())
+        return held
 
     def _gravity_torque(self, q: FloatArray) -> FloatArray:
         """Gravity torque of the controller's model at ``q`` (zero velocity)."""
@@ -309,7 +318,7 @@ class _Rig:
 
     @property
     def at_rest(self) -> bool:
-        return bool(np.all(np.abs(self.qd_m) < self.rest))
+        return bool((np.abs(self.qd_m) < self.rest).all())
 
     # ------------------------------------------------------------------ ground truth
     def _contacts(self) -> None:
