@@ -6,6 +6,7 @@ kinematic engine's time for the same runs beside it.
 
 Columns (default physics parameters, the scenario's own settings otherwise):
   wall      wall time of the physics run [s] (target: 240 s of arm time in <= 60 s)
+  cpu       CPU time of the physics run [s] (what wall time is on an idle core)
   kin       wall time of the kinematic engine on the same scenario, seed and duration [s]
   moves     guarded moves of the physics run (kmoves: of the kinematic run)
   tip/joint/body  contact events by kind (where they settled)
@@ -45,19 +46,19 @@ def main() -> None:
     names = args.scenarios or list_scenarios()
     print(f"{args.duration:.0f} s of arm time per run; load average before: "
           f"{os.getloadavg()[0]:.2f}", flush=True)
-    head = (f"{'scenario':<14}{'seed':>5}{'wall':>7}{'kin':>6}{'moves':>6}{'kmoves':>7}{'tip':>5}"
-            f"{'joint':>6}{'body':>5}{'stop%':>6}{'dur':>6}{'slid':>5}{'rebound':>8}"
+    head = (f"{'scenario':<14}{'seed':>5}{'wall':>7}{'cpu':>6}{'kin':>6}{'moves':>6}"
+            f"{'kmoves':>7}{'tip':>5}{'joint':>6}{'body':>5}{'stop%':>6}{'dur':>6}{'slid':>5}{'rebound':>8}"
             f"{'F50':>7}{'pen':>6}{'dev':>6}")
     print(head)
     print("-" * len(head))
-    totals: dict[str, list[float]] = {"wall": [], "kin": [], "events": [], "stopped": [],
+    totals: dict[str, list[float]] = {"wall": [], "cpu": [], "kin": [], "events": [], "stopped": [],
                                       "slid": [], "rebound": [], "dur": []}
     for name in names:
         sc = load_scenario(name)
         for seed in args.seeds:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             res = sc.simulate(engine="physics", seed=seed, duration=args.duration)
-            wall = time.perf_counter() - t0
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             kin, kmoves = float("nan"), -1
             if not args.no_kinematic:
                 t0 = time.perf_counter()
@@ -72,7 +73,7 @@ def main() -> None:
             rebound = int(np.count_nonzero(ev["rebounds"] > 0))
             stopped = int(truth.contact_stopped.sum())
             dev = max(res.stats["deviation"].values(), default=0.0)
-            print(f"{name:<14}{seed:>5}{wall:>7.1f}{kin:>6.1f}{len(res.moves):>6}{kmoves:>7}"
+            print(f"{name:<14}{seed:>5}{wall:>7.1f}{cpu:>6.1f}{kin:>6.1f}{len(res.moves):>6}{kmoves:>7}"
                   f"{kinds.count('tip'):>5}{kinds.count('joint'):>6}{kinds.count('body'):>5}"
                   f"{100 * stopped / max(m, 1):>6.0f}"
                   f"{(np.median(dur) if m else float('nan')):>6.2f}{slid:>5}{rebound:>8}"
@@ -80,6 +81,7 @@ def main() -> None:
                   f"{(1e3 * np.median(ev['depth']) if m else float('nan')):>6.2f}"
                   f"{1e3 * dev:>6.2f}", flush=True)
             totals["wall"].append(wall)
+            totals["cpu"].append(cpu)
             totals["kin"].append(kin)
             totals["events"].append(m)
             totals["stopped"].append(stopped)
@@ -89,7 +91,8 @@ def main() -> None:
     events = sum(totals["events"])
     print("-" * len(head))
     print(f"{len(totals['wall'])} runs: physics wall median {np.median(totals['wall']):.1f} s, "
-          f"max {np.max(totals['wall']):.1f} s; kinematic median "
+          f"max {np.max(totals['wall']):.1f} s (CPU max {np.max(totals['cpu']):.1f} s); "
+          f"kinematic median "
           f"{np.median(totals['kin']):.1f} s; {events:.0f} events, "
           f"{100 * sum(totals['stopped']) / max(events, 1):.0f} % stopped the arm, "
           f"median duration {np.median(totals['dur']) if events else float('nan'):.2f} s, "
