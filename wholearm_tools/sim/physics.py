@@ -496,25 +496,11 @@ def simulate_physics(
     N = int(np.floor(duration * rate + 1e-9)) + 1
     rig = _Rig(robot, obstacles, physics, controller, sensors, rate, N, q_home,
                np.random.default_rng(noise_seq))
-    vmax = controller.speed * np.asarray(robot.velocity_limits)
-    amax = vmax / controller.t_acc
-    rig.rest = physics.rest_speed * vmax
-    friction_error = physics.joint_friction * rig.effort / rig.K
-    reach_tol = 2.0 * friction_error + 10.0 * rig.quantum + 1e-3
-    settle_steps = max(1, round(physics.settle_time / rig.dt))
-    sample_every = max(1, round(0.01 / rig.dt))  # executed path vertices every 10 ms
+    sup = _Supervisor(rig, collider, controller, physics)
     sweep_step = grid.cell / 2
     max_lever = float(collider.lever.max())
     moves: list[Move] = []
     idle = 0
-
-    def hold_until_rest(q_hold: FloatArray, limit: float) -> None:
-        still, t_end = 0, rig.t + limit
-        zero = np.zeros(n)
-        while not rig.log.full and still < settle_steps and rig.t < t_end:
-            rig.step(q_hold, zero)
-            still = still + 1 if rig.at_rest else 0
-
     while not rig.log.full:
         q = rig.q_m.copy()  # the strategy sees the encoders
         target = strat.next_target(q)
@@ -525,68 +511,27 @@ def simulate_physics(
             continue
         idle = 0
         t0 = rig.t
-        q_from = rig.q_ref.copy()  # the plan continues from the last reference
-        delta = target - q_from
-        law = synchronised_law(delta, vmax, amax)
-        T = law.duration
-        timeout = T + 2.0 + float(np.max(rig.lead / np.maximum(vmax, 1e-9)))
-        path = [q.copy()]
-        still = 0
-        at_rest = False
-        # the plan at every physics step (it stays at the target after T)
-        s_plan, sd_plan = law(np.arange(int(np.ceil(T / rig.dt)) + 2) * rig.dt)
-        q_plan = q_from + s_plan[:, None] * delta
-        qd_plan = sd_plan[:, None] * delta
-        last = len(s_plan) - 1
-        i = 0
-        while not rig.log.full:
-            j = min(i, last)
-            held = rig.step(q_plan[j], qd_plan[j])
-            i += 1
-            if rig.step_i % sample_every == 0:
-                path.append(rig.q_m.copy())
-            still = still + 1 if rig.at_rest else 0
-            at_rest = still >= settle_steps
-            if at_rest and (i >= last or held):
-                break
-            if i * rig.dt > timeout:  # still sliding: the supervisor gives up on the move
-                break
-        q_stop = rig.q_m.copy()
-        path.append(q_stop)
-        t_stop = rig.t
-        vertices = np.array(path)
-        short = np.abs(target - q_stop) > reach_tol
+        plan, vertices, at_rest = sup.guarded_move(target)
         if rig.log.full:
             break
+        t_stop = rig.t
+        q_stop = vertices[-1]
+        short = np.abs(target - q_stop) > sup.reach_tol
+        swept = densify(vertices, sweep_step, max_lever)
+        grid.mark(swept)
         if not short.any():
-            swept = densify(vertices, sweep_step, max_lever)
-            grid.mark(swept)
             strat.observe(swept, None)
             moves.append(Move(t0, t_stop, t_stop, t_stop, q, target, ()))
         else:
             # contacts the arm came to rest against stopped it; after a timeout it was still
             # moving (sliding), and nothing stopped it
             stopped = rig.mark_stopped() if at_rest else []
-            for _ in range(round(controller.dwell / rig.dt)):
-                if rig.log.full:
-                    break
-                j = min(i, last)
-                rig.step(q_plan[j], qd_plan[j])
-                i += 1
-            swept = densify(vertices, sweep_step, max_lever)
-            grid.mark(swept)
+            sup.follow(plan, round(controller.dwell / rig.dt))  # dwell, still pushing
             # the supervisor's view: joints within tolerance reached their target
             reached = np.where(short, q_stop, target)
             strat.observe(swept, densify(np.stack([reached, target]), sweep_step, max_lever))
             t_retreat = rig.t
-            back = _retreat_vertices(collider, vertices, controller)
-            retreat = PolylinePath.build(back, vmax, controller.t_acc)
-            qr, qdr = retreat.sample(np.arange(int(retreat.duration / rig.dt) + 1) * rig.dt)
-            for j in range(len(qr)):
-                if rig.log.full:
-                    break
-                rig.step(qr[j], qdr[j])
-            hold_until_rest(back[-1], 0.5)
+            sup.retreat(vertices)
             ids = tuple(sorted(id(ev) for ev in stopped))
             moves.append(Move(t0, t_stop, t_retreat, rig.t, q, target, ids))
         if progress is not None:
@@ -597,6 +542,90 @@ def simulate_physics(
 
     return _result(robot, collider, rig, strat, moves, controller, sensors, physics, rate,
                    duration, seed, meta, progress, wall0)
+
+
+@dataclass
+class _Plan:
+    """Reference positions and velocities at every physics step; held at the end."""
+
+    q: FloatArray  # (K, n)
+    qd: FloatArray  # (K, n)
+    i: int = 0
+
+    def next(self) -> tuple[FloatArray, FloatArray]:
+        j = min(self.i, len(self.q) - 1)
+        self.i += 1
+        return self.q[j], self.qd[j]
+
+    @property
+    def done(self) -> bool:
+        return self.i >= len(self.q) - 1
+
+
+class _Supervisor:
+    """Guarded moves and retreats as a rig's supervisor runs them, from encoders only."""
+
+    def __init__(self, rig: _Rig, collider: Collider, controller: Controller,
+                 physics: Physics) -> None:
+        self.rig = rig
+        self.collider = collider
+        self.controller = controller
+        self.vmax = controller.speed * np.asarray(rig.robot.velocity_limits)
+        self.amax = self.vmax / controller.t_acc
+        rig.rest = physics.rest_speed * self.vmax
+        friction_error = physics.joint_friction * rig.effort / rig.K
+        #: joints this close to their target reached it
+        self.reach_tol = 2.0 * friction_error + 10.0 * rig.quantum + 1e-3
+        self.settle_steps = max(1, round(physics.settle_time / rig.dt))
+        self.sample_every = max(1, round(0.01 / rig.dt))  # swept path vertices every 10 ms
+
+    def guarded_move(self, target: FloatArray) -> tuple[_Plan, FloatArray, bool]:
+        """Move toward ``target`` from the last reference until the arm is at rest with the
+        plan complete or a reference held, or the plan and a grace time are over.  Returns
+        the plan (to keep pushing), the measured path ``(K, n)`` and whether it came to rest."""
+        rig = self.rig
+        q_from = rig.q_ref.copy()  # the plan continues from the last reference
+        delta = target - q_from
+        law = synchronised_law(delta, self.vmax, self.amax)
+        T = law.duration
+        timeout = T + 2.0 + float(np.max(rig.lead / np.maximum(self.vmax, 1e-9)))
+        s, sd = law(np.arange(int(np.ceil(T / rig.dt)) + 2) * rig.dt)
+        plan = _Plan(q_from + s[:, None] * delta, sd[:, None] * delta)
+        path = [rig.q_m.copy()]
+        still = 0
+        at_rest = False
+        while not rig.log.full:
+            held = rig.step(*plan.next())
+            if rig.step_i % self.sample_every == 0:
+                path.append(rig.q_m.copy())
+            still = still + 1 if rig.at_rest else 0
+            at_rest = still >= self.settle_steps
+            if at_rest and (plan.done or held):
+                break
+            if plan.i * rig.dt > timeout:  # still sliding: the supervisor gives up
+                break
+        path.append(rig.q_m.copy())
+        return plan, np.array(path), at_rest
+
+    def follow(self, plan: _Plan, steps: int) -> None:
+        for _ in range(steps):
+            if self.rig.log.full:
+                return
+            self.rig.step(*plan.next())
+
+    def retreat(self, vertices: FloatArray) -> None:
+        """Back along the measured path as the kinematic engine retreats, then until the arm is
+        at rest (at most half a second)."""
+        rig = self.rig
+        back = _retreat_vertices(self.collider, vertices, self.controller)
+        path = PolylinePath.build(back, self.vmax, self.controller.t_acc)
+        qr, qdr = path.sample(np.arange(int(path.duration / rig.dt) + 1) * rig.dt)
+        self.follow(_Plan(qr, qdr), len(qr))
+        still, t_end = 0, rig.t + 0.5
+        zero = np.zeros(rig.n)
+        while not rig.log.full and still < self.settle_steps and rig.t < t_end:
+            rig.step(back[-1], zero)
+            still = still + 1 if rig.at_rest else 0
 
 
 def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
