@@ -101,3 +101,18 @@ def test_event_field_shape_is_checked() -> None:
                     contact_link=base.contact_link, contact_kind=base.contact_kind,
                     contact_point=base.contact_point, contact_surface=base.contact_surface,
                     contact_s=base.contact_s, contact_force=[1.0, 2.0])
+
+
+def test_event_fields_read_back_from_plain_lists() -> None:
+    """JSON readers hand lists back, with null for NaN; no contacts at all is a valid run."""
+    empty = GroundTruth(surfaces=(), contact_t=[], contact_link=[], contact_kind=[],
+                        contact_point=[], contact_surface=[], contact_s=[], contact_t_end=[],
+                        contact_force=[], contact_q=[], contact_stopped=[],
+                        contact_point_first=[])
+    assert empty.contact_q.shape == (0, 0)
+    assert empty.contact_point_first.shape == (0, 3)
+    one = GroundTruth(surfaces=(), contact_t=[0.1], contact_link=[0], contact_kind=["tip"],
+                      contact_point=[[0, 0, 0]], contact_surface=[0], contact_s=[1.0],
+                      contact_t_end=[None], contact_force=[None], contact_q=[[0.1, None]])
+    assert np.isnan(one.contact_t_end[0])
+    assert np.isnan(one.contact_q[0, 1])

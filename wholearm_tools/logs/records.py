@@ -179,10 +179,14 @@ class GroundTruth:
         for name, (default, dtype, shape) in defaults.items():
             value = getattr(self, name)
             arr = _frozen(default if value is None else value, dtype)
+            if arr.size == 0 and m == 0:
+                arr = _frozen(arr.reshape(shape), dtype)  # e.g. [] read back from JSON
             if arr.shape != shape:
                 raise InputError(f"expected {name} of shape {shape}, got {arr.shape}")
             object.__setattr__(self, name, arr)
         q = _frozen(np.zeros((m, 0)) if self.contact_q is None else self.contact_q)
+        if q.size == 0 and q.ndim != 2:
+            q = _frozen(q.reshape(m, 0))
         if q.ndim != 2 or q.shape[0] != m:
             raise InputError(f"expected contact_q of shape ({m}, n), got {q.shape}")
         object.__setattr__(self, "contact_q", q)
