@@ -1,8 +1,10 @@
 """``wholearm demo``: the whole job on the bundled well junction.
 
 simulate ``well_junction`` → write the run as MCAP → read it back as a real log would be →
-reconstruct → map.json + contacts.csv → meshes → PDF report → Foxglove overlay.
-The demo owns its output folder (default ``reports/demo``) and replaces what it wrote before.
+reconstruct → every output of ``wholearm reconstruct`` (map.json, contacts.csv,
+report_data.json, meshes, overlay.mcap, report.pdf) beside the run.  The demo owns its output
+folder (default ``reports/demo``) and replaces what it wrote before, as a unit
+(``wholearm_tools.outputs``).
 """
 
 from __future__ import annotations
@@ -11,11 +13,10 @@ import time
 from pathlib import Path
 
 import click
-import numpy as np
 
 from cli.reconstruct import summary_lines
 
-MESH_FORMATS = ("ply", "stl", "obj", "glb", "vtp")
+RUN_NAME = "run.mcap"
 
 
 def _step(message: str) -> float:
@@ -37,58 +38,35 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
             B: float | None) -> None:
     """Run the whole pipeline on a simulated run and write every deliverable."""
     from wholearm_tools.logs import read_run, write_run
-    from wholearm_tools.mesh import export_mesh, map_mesh, write_overlay
-    from wholearm_tools.outputs import write_reconstruction
+    from wholearm_tools.outputs import OutputSet, reconstruction_names, write_outputs
     from wholearm_tools.pipeline import reconstruct
-    from wholearm_tools.report import write_report
     from wholearm_tools.sim import load_scenario
 
     start = time.perf_counter()
     sc = load_scenario(scenario)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise click.ClickException(f"{out_dir}: cannot create ({exc.strerror})") from None
-    run_path = out_dir / "run.mcap"
+    with OutputSet(out_dir, reconstruction_names({RUN_NAME}), overwrite=True) as out:
+        run_path = out.path(RUN_NAME)
+        t = _step(f"simulating {sc.name} ({sc.duration if duration is None else duration:g} s "
+                  "of arm time)")
+        sim = sc.simulate(seed=seed, duration=duration)
+        write_run(run_path, sim.run)
+        click.echo(f"  {sim.run.log.n_samples} samples, {sim.truth.n_contacts} true contacts "
+                   f"({time.perf_counter() - t:.1f} s)", err=True)
 
-    t = _step(f"simulating {sc.name} ({sc.duration if duration is None else duration:g} s of "
-              "arm time)")
-    sim = sc.simulate(seed=seed, duration=duration)
-    write_run(run_path, sim.run)
-    click.echo(f"  {sim.run.log.n_samples} samples, {sim.truth.n_contacts} true contacts "
-               f"({time.perf_counter() - t:.1f} s)", err=True)
-
-    B = float(B if B is not None else sc.hints.get("B", 0.02))
-    t = _step(f"reconstructing from {run_path} with B = {B:g} m")
-    rec = reconstruct(read_run(run_path, require_commands=True), B=B)
-    if not rec.surface_map.primitives:
-        raise click.ClickException(f"{run_path}: nothing could be fitted "
-                                   f"({'; '.join(rec.messages) or 'no primitive found'})")
-    paths = write_reconstruction(out_dir, rec)
-    click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
-
-    t = _step("meshing and exporting " + ", ".join(MESH_FORMATS))
-    mesh = map_mesh(rec.surface_map)
-    for fmt in MESH_FORMATS:
-        paths[f"mesh.{fmt}"] = export_mesh(mesh, out_dir / f"map.{fmt}", fmt)
-    table = rec.table
-    paths["overlay"] = write_overlay(
-        out_dir / "overlay.mcap", rec.surface_map,
-        contact_points=table.tip_center[table.used_as_tip],
-        contact_p_tip=table.p_tip[table.used_as_tip],
-        contact_segments=np.stack([table.seg_a[~table.used_as_tip],
-                                   table.seg_b[~table.used_as_tip]], axis=1),
-        t0_ns=rec.run.log.t0_ns)
-    click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
-
-    t = _step("writing the PDF report")
-    paths["report"] = out_dir / "report.pdf"
-    write_report(paths["report"], rec)
-    click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
+        B = float(B if B is not None else sc.hints.get("B", 0.02))
+        t = _step(f"reconstructing from {out.final(RUN_NAME)} with B = {B:g} m")
+        rec = reconstruct(read_run(run_path, require_commands=True), B=B)
+        if not rec.surface_map.primitives:
+            raise click.ClickException(f"{out.final(RUN_NAME)}: nothing could be fitted "
+                                       f"({'; '.join(rec.messages) or 'no primitive found'})")
+        click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
+        t = _step("writing map.json, contacts.csv, meshes, overlay and the PDF report")
+        paths = write_outputs(out, rec, input_path=run_path)
+        click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
 
     for line in summary_lines(rec):
         click.echo(line)
     click.echo(f"\noutputs in {out_dir}/ (total {time.perf_counter() - start:.0f} s):")
-    click.echo(f"  run log      {run_path}")
+    click.echo(f"  {'run log':<12} {out.final(RUN_NAME)}")
     for key, path in paths.items():
         click.echo(f"  {key:<12} {path}")

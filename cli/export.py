@@ -46,7 +46,12 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
             resolution: float, height: float, no_unexplained: bool, overwrite: bool,
             as_json: bool) -> None:
     from wholearm_tools.mapfile import read_map
-    from wholearm_tools.mesh.export import export_drawing, export_mesh, map_mesh
+    from wholearm_tools.mesh.export import (
+        export_drawing,
+        export_mesh,
+        map_meshes,
+        map_scene_metadata,
+    )
 
     formats = tuple(dict.fromkeys(f.lower() for f in formats))
     folder = output_dir if output_dir is not None else map_file.parent
@@ -60,11 +65,11 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
     if drawings and not surface_map.planar:
         raise click.ClickException(
             f"{map_file}: {'/'.join(drawings)} drawings need a planar map (this map is 3-D)")
-    mesh = None
+    parts = []
     if any(fmt in MESH_FORMATS for fmt in formats):
-        mesh = map_mesh(surface_map, resolution=resolution, height=height,
-                        include_unexplained=not no_unexplained)
-        if mesh.is_empty:
+        parts = map_meshes(surface_map, resolution=resolution, height=height,
+                           include_unexplained=not no_unexplained)
+        if all(part.mesh.is_empty for part in parts):
             raise click.ClickException(f"{map_file}: the map has nothing to mesh")
     created: list[Path] = []
     try:
@@ -73,8 +78,8 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
             if fmt in DRAWING_FORMATS:
                 export_drawing(surface_map, out, format=fmt, resolution=resolution)
             else:
-                assert mesh is not None
-                export_mesh(mesh, out, format=fmt)
+                export_mesh(parts, out, format=fmt, frame=surface_map.frame,
+                            metadata=map_scene_metadata(surface_map))
             if not existed:
                 created.append(out)
     except BaseException:
@@ -84,8 +89,9 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
         raise
     if as_json:
         click.echo(json.dumps({"map": str(map_file), "outputs": {f: str(o) for f, o in outputs},
-                               "vertices": mesh.n_vertices if mesh else 0,
-                               "triangles": mesh.n_triangles if mesh else 0}))
+                               "surfaces": [part.name for part in parts],
+                               "vertices": sum(part.mesh.n_vertices for part in parts),
+                               "triangles": sum(part.mesh.n_triangles for part in parts)}))
     else:
         for _, out in outputs:
             click.echo(str(out))

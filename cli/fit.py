@@ -1,4 +1,8 @@
-"""``wholearm fit contacts.csv -o map.json``: fit already-classified contacts."""
+"""``wholearm fit contacts.csv -o map.json``: fit already-classified contacts.
+
+Writes the map and, beside it, its report data (``report_data.json`` beside ``map.json``): the
+fit's assignment of the contacts, so ``wholearm report`` renders the folder without refitting.
+"""
 
 from __future__ import annotations
 
@@ -30,22 +34,27 @@ def command(contacts: Path, output: Path, B: float, kinds: tuple[str, ...], loss
             as_json: bool, overwrite: bool) -> None:
     """Fit-and-grow primitives to the contacts of CONTACTS (a contacts.csv)."""
     from wholearm_tools.contact_table import read_contact_table
-    from wholearm_tools.mapfile import write_map
+    from wholearm_tools.outputs import write_fit
     from wholearm_tools.pipeline import fit_table
 
     check_output_file(output, overwrite)
     table = read_contact_table(contacts)
-    surface_map, _, _, messages = fit_table(
+    surface_map, fits, fitted, messages = fit_table(
         table, planar=table.dim == 2, B=B, kinds=kinds or None, loss=loss,
         meta={"source": str(contacts)})
     if not surface_map.primitives:
         reason = "; ".join(messages) or "no primitive explains the contacts"
         raise click.ClickException(f"{contacts}: nothing could be fitted ({reason})")
-    write_map(output, surface_map)
+    paths = write_fit(output, contacts, surface_map, fits, fitted, messages,
+                      {"B": B, "loss": loss, "kinds": list(kinds) or None}, overwrite=overwrite)
     if as_json:
-        click.echo(json.dumps(surface_map.to_json()))
+        from wholearm_tools.mapfile import read_map
+
+        click.echo(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
+                               **read_map(paths["map"]).to_json()}))
         return
     for p in surface_map.primitives:
         click.echo(f"#{p.id} {p.kind}: support tip {p.support['tip']} link {p.support['link']}, "
                    f"rms {p.rms_residual * 1e3:.2f} mm")
-    click.echo(f"wrote {output}")
+    click.echo(f"wrote {paths['map']} and {paths['report_data'].name} "
+               f"(`wholearm report {paths['map'].parent}` renders its report)")

@@ -1,4 +1,6 @@
-"""``wholearm reconstruct RUN.mcap --B 0.02 -o out/``: contacts, classification and fitted map."""
+"""``wholearm reconstruct RUN.mcap --B 0.02 -o out/``: contacts, classification, fitted map and
+every deliverable of the run (map.json, contacts.csv, report_data.json, meshes, overlay.mcap,
+report.pdf), written into the folder as a unit (``wholearm_tools.outputs``)."""
 
 from __future__ import annotations
 
@@ -17,7 +19,6 @@ from cli.options import (
     json_option,
     loss_option,
     overwrite_option,
-    prepare_output_dir,
     rig_options,
 )
 
@@ -44,39 +45,78 @@ def summary_lines(rec) -> list[str]:
     return lines
 
 
+def output_choice_options(func):
+    """``--no-meshes``, ``--mesh-format``, ``--no-overlay``, ``--no-report``: which outputs of
+    the set to write (map.json, contacts.csv and report_data.json always are)."""
+    from wholearm_tools.outputs import DEFAULT_MESH_FORMATS, MESH_FORMATS
+
+    for option in reversed([
+        click.option("--mesh-format", "mesh_formats", multiple=True,
+                     type=click.Choice(MESH_FORMATS, case_sensitive=False),
+                     help="Mesh format to write (repeatable; default: "
+                          f"{', '.join(DEFAULT_MESH_FORMATS)})."),
+        click.option("--no-meshes", is_flag=True, help="Write no mesh files."),
+        click.option("--no-overlay", is_flag=True, help="Do not write overlay.mcap."),
+        click.option("--no-report", is_flag=True, help="Do not write report.pdf "
+                     "(`wholearm report OUT/` renders it later from the folder)."),
+    ]):
+        func = option(func)
+    return func
+
+
+def chosen_meshes(mesh_formats: tuple[str, ...], no_meshes: bool) -> tuple[str, ...]:
+    from wholearm_tools.outputs import DEFAULT_MESH_FORMATS
+
+    if no_meshes:
+        if mesh_formats:
+            raise click.UsageError("--no-meshes and --mesh-format exclude each other")
+        return ()
+    return tuple(f.lower() for f in mesh_formats) or DEFAULT_MESH_FORMATS
+
+
 @click.command("reconstruct")
 @click.argument("run", type=click.Path(exists=True, path_type=Path))
 @B_option()
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Output folder (map.json, contacts.csv).")
+              required=True, help="Output folder (map.json, contacts.csv, report_data.json, "
+              "meshes, overlay.mcap, report.pdf).")
 @causal_option
 @loss_option
 @rig_options
 @joint_topic_option
 @command_topic_option
 @fit_workers_option
+@output_choice_options
 @json_option
 @overwrite_option
 def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: RigOptions,
             joint_topic: str | None, command_topic: str | None, workers: int | None,
+            mesh_formats: tuple[str, ...], no_meshes: bool, no_overlay: bool, no_report: bool,
             as_json: bool, overwrite: bool) -> None:
-    """Reconstruct the environment of RUN: detect, classify with B, fit primitives."""
+    """Reconstruct the environment of RUN: detect, classify with B, fit primitives; write
+    every output of the run into the folder (--overwrite replaces a previous set whole)."""
+    import logging
+
     from wholearm_tools.logs import read_run
-    from wholearm_tools.outputs import write_reconstruction
+    from wholearm_tools.outputs import OutputSet, reconstruction_names, write_outputs
     from wholearm_tools.pipeline import reconstruct
 
-    prepare_output_dir(out_dir, ["map.json", "contacts.csv"], overwrite)
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                    require_commands=True, **rig.read_kwargs())
-    rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
-    if not rec.surface_map.primitives:
-        reason = "; ".join(rec.messages) or "no primitive explains the contacts"
-        raise click.ClickException(f"{run}: nothing could be fitted ({reason})")
-    paths = write_reconstruction(out_dir, rec)
+    log = logging.getLogger("wholearm.reconstruct")
+    meshes = chosen_meshes(mesh_formats, no_meshes)
+    with OutputSet(out_dir, reconstruction_names(), overwrite=overwrite) as out:
+        data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                        require_commands=True, **rig.read_kwargs())
+        rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
+        if not rec.surface_map.primitives:
+            reason = "; ".join(rec.messages) or "no primitive explains the contacts"
+            raise click.ClickException(f"{run}: nothing could be fitted ({reason})")
+        paths = write_outputs(out, rec, input_path=run, meshes=meshes, overlay=not no_overlay,
+                              report=not no_report, progress=log.info)
     if as_json:
-        click.echo(json.dumps({"map": str(paths["map"]), "contacts": str(paths["contacts"]),
+        click.echo(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
+                               "map": str(paths["map"]), "contacts": str(paths["contacts"]),
                                **rec.surface_map.to_json()}))
         return
     for line in summary_lines(rec):
         click.echo(line)
-    click.echo(f"wrote {paths['map']} and {paths['contacts']}")
+    click.echo(f"wrote {out_dir}/: " + ", ".join(p.name for p in paths.values()))

@@ -5,10 +5,21 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
 from cli.options import check_output_file, overwrite_option, progress_enabled
+
+#: CLI physics option → ``Physics`` field it sets
+_PHYSICS_OPTIONS = {
+    "friction": "friction",
+    "joint_friction": "joint_friction",
+    "gravity": "gravity",
+    "contact_timeconst": "contact_timeconst",
+    "contact_dampratio": "contact_dampratio",
+    "physics_rate": "rate",
+}
 
 
 @click.command("simulate")
@@ -24,10 +35,35 @@ from cli.options import check_output_file, overwrite_option, progress_enabled
               help="Exploration strategy: random, sweep or novelty (default: the scenario's).")
 @click.option("--profile", type=click.Choice(["ros2", "json"]), default="ros2",
               show_default=True, help="MCAP message encoding.")
+@click.option("--engine", type=click.Choice(["kinematic", "physics"]), default="kinematic",
+              show_default=True,
+              help="kinematic: idealised rigid stops; physics: MuJoCo with friction, soft "
+                   "contacts, joint friction and a torque-limited PD controller.")
+@click.option("--friction", type=click.FloatRange(min=0.0), default=None,
+              help="[physics] Coulomb friction arm-environment (default: the scenario's, 0.4).")
+@click.option("--joint-friction", type=click.FloatRange(min=0.0, max=1.0, max_open=True),
+              default=None,
+              help="[physics] Coulomb joint friction as a fraction of the effort limit "
+                   "(default: the scenario's, 0.02).")
+@click.option("--gravity/--no-gravity", default=None,
+              help="[physics] Gravity along -z, compensated by the controller (default: the "
+                   "scenario's, off).")
+@click.option("--contact-timeconst", type=click.FloatRange(min=0.0, min_open=True),
+              default=None,
+              help="[physics] Soft-contact time constant in s: stiffness (default: the "
+                   "scenario's, 0.005).")
+@click.option("--contact-dampratio", type=click.FloatRange(min=0.0, min_open=True),
+              default=None,
+              help="[physics] Soft-contact damping ratio; below 1 contacts rebound (default: "
+                   "the scenario's, 0.7).")
+@click.option("--physics-rate", type=click.FloatRange(min=1.0), default=None,
+              help="[physics] Smallest physics rate in Hz (default: the scenario's, 1000).")
+@click.option("--mjcf", "mjcf_file", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="[physics] Also write the MuJoCo scene (MJCF) to this file.")
 @overwrite_option
 def command(scenario: str, output: Path, seed: int | None, rate: float | None,
-            duration: float | None, strategy: str | None, profile: str,
-            overwrite: bool) -> None:
+            duration: float | None, strategy: str | None, profile: str, engine: str,
+            mjcf_file: Path | None, overwrite: bool, **physics_options: Any) -> None:
     """Simulate SCENARIO (a bundled name or a YAML path) and write the run to OUTPUT."""
     from wholearm_tools.logs import write_run
     from wholearm_tools.sim.scenarios import load_scenario
@@ -40,11 +76,20 @@ def command(scenario: str, output: Path, seed: int | None, rate: float | None,
     if strategy is not None and strategy not in STRATEGIES:
         raise click.ClickException(
             f"unknown strategy {strategy!r} (known: {', '.join(sorted(STRATEGIES))})")
+    given = {k: v for k, v in physics_options.items() if v is not None}
+    if engine != "physics" and (given or mjcf_file is not None):
+        names = [f"--{k.replace('_', '-')}" for k in given] + (["--mjcf"] if mjcf_file else [])
+        raise click.ClickException(f"{', '.join(names)} apply to --engine physics only")
+    if mjcf_file is not None:
+        check_output_file(mjcf_file, overwrite)
     sc = load_scenario(scenario)
+    physics = sc.physics.replace(**{_PHYSICS_OPTIONS[k]: v for k, v in given.items()})
     wall0 = time.perf_counter()
     total = sc.duration if duration is None else duration
+    run_args = {"seed": seed, "duration": duration, "rate": rate, "strategy": strategy,
+                "engine": engine, "physics": physics}
     if progress_enabled():
-        with click.progressbar(length=1000, label=f"simulating {sc.name}",
+        with click.progressbar(length=1000, label=f"simulating {sc.name} ({engine})",
                                file=sys.stderr) as bar:
             done = [0]
 
@@ -53,18 +98,25 @@ def command(scenario: str, output: Path, seed: int | None, rate: float | None,
                 bar.update(pos - done[0])
                 done[0] = pos
 
-            result = sc.simulate(seed=seed, duration=duration, rate=rate, strategy=strategy,
-                                 progress=progress)
+            result = sc.simulate(progress=progress, **run_args)
     else:
-        result = sc.simulate(seed=seed, duration=duration, rate=rate, strategy=strategy)
+        result = sc.simulate(**run_args)
     write_run(output, result.run, profile=profile)
+    if mjcf_file is not None:
+        from wholearm_tools._io import write_text_atomic
+
+        write_text_atomic(mjcf_file, result.stats["mjcf"])
     wall = time.perf_counter() - wall0
     counts = result.contact_counts()
     log = result.run.log
+    truth = result.truth
+    stopped = ""
+    if engine == "physics":
+        stopped = f", {int(truth.contact_stopped.sum())} stopped the arm"
     click.echo(
         f"{sc.name}: simulated {log.duration:.1f} s at {log.rate:.0f} Hz ({log.n_samples} samples,"
-        f" {len(result.moves)} moves) with strategy {result.truth.meta['strategy']} and seed "
-        f"{result.truth.meta['seed']}; {result.truth.n_contacts} contacts (tip {counts['tip']}, "
-        f"joint {counts['joint']}, body {counts['body']}) on "
-        f"{len(set(result.truth.contact_surface.tolist()))} of {len(result.truth.surfaces)} "
+        f" {len(result.moves)} moves) with the {engine} engine, strategy "
+        f"{truth.meta['strategy']} and seed {truth.meta['seed']}; {truth.n_contacts} contacts "
+        f"(tip {counts['tip']}, joint {counts['joint']}, body {counts['body']}{stopped}) on "
+        f"{len(set(truth.contact_surface.tolist()))} of {len(truth.surfaces)} "
         f"surfaces; wrote {output} ({profile}) in {wall:.1f} s wall time.")

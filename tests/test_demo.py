@@ -14,8 +14,8 @@ def test_demo_writes_every_deliverable(tmp_path) -> None:
     result = CliRunner().invoke(cli, ["demo", "-o", str(out), "--scenario", "lab_circle",
                                       "--duration", "60"])
     assert result.exit_code == 0, result.output
-    for name in ("run.mcap", "map.json", "contacts.csv", "map.ply", "map.stl", "map.obj",
-                 "map.glb", "map.vtp", "overlay.mcap", "report.pdf"):
+    for name in ("run.mcap", "map.json", "contacts.csv", "report_data.json", "map.ply",
+                 "map.stl", "map.obj", "map.glb", "map.vtp", "overlay.mcap", "report.pdf"):
         assert (out / name).stat().st_size > 0, name
     assert (out / "report.pdf").read_bytes().startswith(b"%PDF")
     surface_map = read_map(out / "map.json")
@@ -25,4 +25,6 @@ def test_demo_writes_every_deliverable(tmp_path) -> None:
     assert run.truth is not None
     assert run.truth.n_contacts > 0
     assert "outputs in" in result.output
-    assert not list(out.glob(".*.tmp")), "temporary files left behind"
+    assert not list(out.glob(".*")), "temporary files left behind"
+    assert not list(tmp_path.glob(".*")), "staging folder left behind"
+    assert read_map(out / "map.json").meta["input"]["path"] == "run.mcap"

@@ -40,6 +40,12 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def jsonable(value: Any) -> Any:
+    """``value`` made JSON-ready the way map.json writes it: numpy arrays and scalars become
+    lists and numbers, non-finite floats ``null``."""
+    return _jsonable(value)
+
+
 def _arrays(params: Mapping[str, Any]) -> dict[str, Any]:
     """JSON params → floats for scalars and read-only arrays for vectors."""
     out: dict[str, Any] = {}

@@ -50,7 +50,7 @@ def inspect_log(path: str | os.PathLike[str], *, joint_topic: str | None = None
 
     def wanted(topic: str, schema: str) -> bool:
         if schema == STRING:
-            return topic == DESCRIPTION_TOPIC
+            return topic in (DESCRIPTION_TOPIC, TRUTH_TOPIC)
         if schema == FLOAT64_MULTI_ARRAY:
             return topic == COMMAND_TOPIC
         return True

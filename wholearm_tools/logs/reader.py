@@ -79,7 +79,7 @@ def _scan(path: Path, joint_topic: str | None, command_topic: str | None) -> Log
         if schema == FLOAT64_MULTI_ARRAY:
             return topic == commands
         if schema == STRING:
-            return topic == DESCRIPTION_TOPIC
+            return topic in (DESCRIPTION_TOPIC, TRUTH_TOPIC)
         return schema == GROUND_TRUTH
 
     scan = scan_log(path, wanted)
@@ -374,11 +374,27 @@ def read_joint_log(
                       warn_extra=joint_names is not None, effort=effort, stiffness=stiffness)
 
 
+def _nan_column(values: Any, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """Numbers with null as NaN, reshaped to ``shape``."""
+    arr = np.array(values, dtype=object).reshape(shape)
+    arr[np.equal(arr, None)] = np.nan
+    return arr.astype(float)
+
+
 def ground_truth_from_json(body: Any, source: str = "ground truth") -> GroundTruth:
-    """Inverse of :func:`wholearm_tools.logs.writer.ground_truth_to_json`."""
+    """Inverse of :func:`wholearm_tools.logs.writer.ground_truth_to_json`.
+
+    ``body`` is the decoded JSON object, or its text (the data of a ``std_msgs/msg/String``
+    ground-truth message).  Files written before the event fields (``t_end``, ``force``, ``q``,
+    ``stopped``, ``point_first``) existed read with their defaults (see ``GroundTruth``).
+    """
     try:
+        if isinstance(body, str | bytes):
+            body = json.loads(body)
         contacts = body["contacts"]
         m = len(contacts["t"])
+        q = contacts.get("q")
+        n = len(q[0]) if q else 0
         return GroundTruth(
             surfaces=tuple(body["surfaces"]),
             contact_t=np.asarray(contacts["t"], dtype=float).reshape(m),
@@ -388,8 +404,17 @@ def ground_truth_from_json(body: Any, source: str = "ground truth") -> GroundTru
             contact_surface=np.asarray(contacts["surface"], dtype=np.int64).reshape(-1),
             contact_s=np.asarray(contacts["s"], dtype=float).reshape(-1),
             meta=dict(body.get("meta") or {}),
+            contact_t_end=(None if "t_end" not in contacts
+                           else _nan_column(contacts["t_end"], (m,))),
+            contact_force=(None if "force" not in contacts
+                           else _nan_column(contacts["force"], (m,))),
+            contact_q=None if q is None else _nan_column(q, (m, n)),
+            contact_stopped=(None if "stopped" not in contacts
+                             else np.asarray(contacts["stopped"], dtype=bool).reshape(-1)),
+            contact_point_first=(None if "point_first" not in contacts else np.asarray(
+                contacts["point_first"], dtype=float).reshape(m, 3)),
         )
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise LogFormatError(f"{source}: malformed ground truth ({exc!r})") from None
 
 

@@ -129,6 +129,19 @@ class GroundTruth:
     contact_surface : (M,) int, surface id touched
     contact_s : (M,) float, fraction along the link axis of the robot point in contact
     meta : dict, scenario name, seed, B hint, anything else JSON-serialisable
+    contact_t_end : (M,) float, when the contact was released (NaN: unknown)
+    contact_force : (M,) float, peak normal force during the contact [N] (NaN: unknown)
+    contact_q : (M, n) float, true configuration where the contact settled ((M, 0): unknown)
+    contact_stopped : (M,) bool, the contact blocked a commanded motion (the arm stopped against
+        it), as opposed to a graze the arm slid past
+    contact_point_first : (M, 3) float, contact point at first touch (``contact_point`` is where
+        the contact settled; equal when it did not slide)
+
+    One row per contact *event*, from first touch (``contact_t``) until release
+    (``contact_t_end``); ``contact_point``, ``contact_kind``, ``contact_s`` and ``contact_q``
+    describe where it settled.  The last five fields are optional: records built without them
+    (older files) get NaN times and forces, an unknown configuration, ``stopped`` True (the
+    kinematic engine's contacts stop the arm by construction) and the settled point as the first.
     """
 
     surfaces: tuple[dict[str, Any], ...]
@@ -139,6 +152,11 @@ class GroundTruth:
     contact_surface: NDArray[np.int64]
     contact_s: FloatArray
     meta: dict[str, Any] = field(default_factory=dict)
+    contact_t_end: FloatArray | None = None
+    contact_force: FloatArray | None = None
+    contact_q: FloatArray | None = None
+    contact_stopped: NDArray[np.bool_] | None = None
+    contact_point_first: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = np.asarray(self.contact_t).shape[0]
@@ -152,6 +170,26 @@ class GroundTruth:
             if getattr(self, name).shape != (m,):
                 raise InputError(f"expected {name} of shape ({m},), got "
                                  f"{getattr(self, name).shape}")
+        defaults = {
+            "contact_t_end": (np.full(m, np.nan), float, (m,)),
+            "contact_force": (np.full(m, np.nan), float, (m,)),
+            "contact_stopped": (np.ones(m, dtype=bool), np.bool_, (m,)),
+            "contact_point_first": (self.contact_point, float, (m, 3)),
+        }
+        for name, (default, dtype, shape) in defaults.items():
+            value = getattr(self, name)
+            arr = _frozen(default if value is None else value, dtype)
+            if arr.size == 0 and m == 0:
+                arr = _frozen(arr.reshape(shape), dtype)  # e.g. [] read back from JSON
+            if arr.shape != shape:
+                raise InputError(f"expected {name} of shape {shape}, got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        q = _frozen(np.zeros((m, 0)) if self.contact_q is None else self.contact_q)
+        if q.size == 0 and q.ndim != 2:
+            q = _frozen(q.reshape(m, 0))
+        if q.ndim != 2 or q.shape[0] != m:
+            raise InputError(f"expected contact_q of shape ({m}, n), got {q.shape}")
+        object.__setattr__(self, "contact_q", q)
         bad = set(self.contact_kind.tolist()) - set(CONTACT_KINDS)
         if bad:
             raise InputError(f"unknown contact kinds {sorted(bad)}; expected {CONTACT_KINDS}")
@@ -160,6 +198,11 @@ class GroundTruth:
     @property
     def n_contacts(self) -> int:
         return int(self.contact_t.shape[0])
+
+    @property
+    def contact_duration(self) -> FloatArray:
+        """Duration of each contact event [s] (NaN where the release time is unknown)."""
+        return np.asarray(self.contact_t_end) - self.contact_t
 
     @property
     def is_tip(self) -> NDArray[np.bool_]:

@@ -186,7 +186,9 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": GROUND_TRUTH,
         "description": "Ground truth of a simulated wholearm run: environment surfaces and "
-                       "per-contact truth as columns (index i of every column = contact i).",
+                       "per-contact-event truth as columns (index i of every column = contact "
+                       "i).  In the ros2 profile this body is the data of a "
+                       "std_msgs/msg/String on the same topic.",
         "type": "object",
         "properties": {
             "format_version": {"type": "integer"},
@@ -203,6 +205,18 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
                               "description": "contact point on the surface, base frame [m]"},
                     "surface": {"type": "array", "items": {"type": "integer"}},
                     "s": {**_NUMBERS, "description": "fraction along the link axis"},
+                    "t_end": {"type": "array", "items": {"type": ["number", "null"]},
+                              "description": "release time [s] since the log start"},
+                    "force": {"type": "array", "items": {"type": ["number", "null"]},
+                              "description": "peak normal force [N]"},
+                    "q": {"type": "array",
+                          "items": {"type": "array", "items": {"type": ["number", "null"]}},
+                          "description": "true configuration where the contact settled [rad]"},
+                    "stopped": {"type": "array", "items": {"type": "boolean"},
+                                "description": "the contact blocked a commanded motion"},
+                    "point_first": {"type": "array", "items": {**_NUMBERS, "minItems": 3,
+                                                               "maxItems": 3},
+                                    "description": "contact point at first touch [m]"},
                 },
                 "required": ["t", "link", "kind", "point", "surface", "s"],
             },
@@ -211,7 +225,9 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
         "required": ["surfaces", "contacts"],
     },
 }
-"""``jsonschema`` schema by schema name (ground truth is always JSON, in both profiles)."""
+"""``jsonschema`` schema by schema name (the ground-truth body is JSON in both profiles: a
+``wholearm_msgs/msg/GroundTruth`` message in the json profile, the data of a
+``std_msgs/msg/String`` in the ros2 profile)."""
 
 
 def json_schema_bytes(name: str) -> bytes:

@@ -53,8 +53,16 @@ def _dumps(value: Any) -> bytes:
         raise InputError(f"cannot write as JSON: {exc}") from None
 
 
+def _nullable(values: np.ndarray) -> list[Any]:
+    """``values.tolist()`` with NaN as None (JSON has no NaN)."""
+    out = np.asarray(values, dtype=object)
+    out[np.isnan(np.asarray(values, dtype=float))] = None
+    return out.tolist()
+
+
 def ground_truth_to_json(truth: GroundTruth) -> dict[str, Any]:
-    """The ground-truth message body (see the ``wholearm_msgs/msg/GroundTruth`` JSON schema)."""
+    """The ground-truth message body (see the ``wholearm_msgs/msg/GroundTruth`` JSON schema);
+    unknown values (NaN) are written as null."""
     return {
         "format_version": FORMAT_VERSION,
         "surfaces": list(truth.surfaces),
@@ -65,6 +73,11 @@ def ground_truth_to_json(truth: GroundTruth) -> dict[str, Any]:
             "point": truth.contact_point.tolist(),
             "surface": truth.contact_surface.tolist(),
             "s": truth.contact_s.tolist(),
+            "t_end": _nullable(truth.contact_t_end),
+            "force": _nullable(truth.contact_force),
+            "q": _nullable(truth.contact_q),
+            "stopped": truth.contact_stopped.tolist(),
+            "point_first": truth.contact_point_first.tolist(),
         },
         "meta": dict(truth.meta),
     }
@@ -100,8 +113,9 @@ def write_run(
     ----------
     path : output file (replaced atomically; the folder must exist)
     run : the run; ``run.log.t`` is written as header stamps ``t0_ns + round(t * 1e9)`` ns
-    profile : ``"ros2"`` (CDR messages, ``ros2msg`` schemas) or ``"json"`` (JSON messages,
-        ``jsonschema`` schemas); ground truth is a JSON channel in both
+    profile : ``"ros2"`` (CDR messages, ``ros2msg`` schemas; ground truth is a
+        ``std_msgs/msg/String`` holding its JSON) or ``"json"`` (JSON messages, ``jsonschema``
+        schemas; ground truth is a ``wholearm_msgs/msg/GroundTruth`` JSON message)
     chunk_size : uncompressed chunk size in bytes
     compression : ``"zstd"``, ``"lz4"`` or ``"none"``
     """
@@ -172,12 +186,19 @@ def write_run(
                        if has_commands else 0)
         writer.add_message(desc_channel, start_ns, bytes(description), start_ns)
         if run.truth is not None:
-            truth_schema = writer.register_schema(GROUND_TRUTH, SchemaEncoding.JSONSchema,
-                                                  json_schema_bytes(GROUND_TRUTH))
-            truth_channel = writer.register_channel(TRUTH_TOPIC, MessageEncoding.JSON,
-                                                    truth_schema)
-            writer.add_message(truth_channel, start_ns, _dumps(ground_truth_to_json(run.truth)),
-                               start_ns)
+            body = _dumps(ground_truth_to_json(run.truth))
+            if profile == "ros2":
+                # a std_msgs/msg/String holding the JSON: stock ROS 2 readers read every channel
+                truth_channel = writer.register_channel(TRUTH_TOPIC, message_encoding,
+                                                        string_schema)
+                payload = cdr.CDR_LE + (len(body) + 1).to_bytes(4, "little") + body + b"\x00"
+            else:
+                truth_schema = writer.register_schema(GROUND_TRUTH, SchemaEncoding.JSONSchema,
+                                                      json_schema_bytes(GROUND_TRUTH))
+                truth_channel = writer.register_channel(TRUTH_TOPIC, MessageEncoding.JSON,
+                                                        truth_schema)
+                payload = body
+            writer.add_message(truth_channel, start_ns, payload, start_ns)
         add = writer.add_message
         for first in range(0, stamps.shape[0], _BLOCK):
             block = slice(first, first + _BLOCK)

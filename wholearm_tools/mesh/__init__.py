@@ -1,15 +1,18 @@
 """Bounded meshes of fitted primitives, their files and the Foxglove overlay.
 
 Pure geometry (numpy, scipy) in :mod:`.extent`, :mod:`.tessellate` and :mod:`.triangle_mesh`;
-open3d, pyvista, matplotlib and mcap are imported only inside the functions that write files
-(:mod:`.export`, :mod:`.overlay`) or reconstruct free-form surfaces (:mod:`.unexplained`).
+names and colours of the surfaces in :mod:`.style`; trimesh, pyvista, matplotlib and mcap are
+imported only inside the functions that write files (:mod:`.export`, :mod:`.overlay`), open3d
+only where free-form surfaces are reconstructed (:mod:`.unexplained`).
 """
 
 from wholearm_tools.mesh.export import (
     DEFAULT_HEIGHT,
     DRAWING_FORMATS,
     MESH_FORMATS,
+    SurfaceMesh,
     export_drawing,
+    export_map,
     export_mesh,
     map_mesh,
     map_meshes,
@@ -23,7 +26,8 @@ from wholearm_tools.mesh.unexplained import SurfaceReconstruction, unexplained_m
 
 __all__ = [
     "DEFAULT_HEIGHT", "DEFAULT_RESOLUTION", "DRAWING_FORMATS", "MESH_FORMATS",
-    "SurfaceReconstruction", "TriangleMesh", "angular_range", "export_drawing", "export_mesh",
+    "SurfaceMesh", "SurfaceReconstruction", "TriangleMesh", "angular_range", "export_drawing",
+    "export_map", "export_mesh",
     "extrude", "full_extent", "map_mesh", "map_meshes", "merge_meshes", "polyline",
     "primitive_mesh", "scene_update", "support_extent", "tessellate", "unexplained_mesh",
     "write_overlay",

@@ -1,31 +1,52 @@
-"""Meshes of a whole map and their files: PLY, STL, OBJ, glTF/GLB (open3d), VTP (pyvista);
-drawings of planar maps: SVG, PNG (matplotlib, Agg).
+"""Meshes of a whole map and their files; drawings of planar maps.
 
-Every file is written atomically: to a temporary name with the right extension in the target
-folder, then renamed onto the target; a failure removes the temporary file and leaves any
-existing target untouched.
+Every surface of the map is one named part (:class:`SurfaceMesh`): one per fitted primitive,
+plus one for the free-form surface through the contacts no primitive explains.  The files keep
+the parts apart, each with its fixed name and colour (:mod:`wholearm_tools.mesh.style`):
+
+========  =======================================================================================
+format    how the parts are kept (written with trimesh, VTP with pyvista)
+========  =======================================================================================
+glTF/GLB  one node per part under a root node named after the map frame, which turns the robot
+          base frame (z up) into glTF's +Y up; node ``extras`` hold the type, id, parameters,
+          95 % half-widths, support and RMS residual; one material per part (its colour); the
+          scene's ``extras`` hold the map's B, frame and provenance
+OBJ       one ``o``/``g`` group per part, robot base frame
+PLY       per-face colour and a per-face ``primitive_id`` property (-1: unexplained), base frame
+VTP       ``primitive_id`` and ``colour`` cell arrays, the part names in field data, base frame
+STL       one body (the format has no groups), base frame
+========  =======================================================================================
+
+Drawings of planar maps: SVG, PNG (matplotlib, Agg).  Every file is written atomically: to a
+temporary name in the target folder, then renamed onto the target; a failure removes the
+temporary file and leaves any existing target untouched.
 """
 
 from __future__ import annotations
 
-import base64
 import functools
 import json
 import logging
 import os
-import struct
-import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wholearm_tools import __version__
 from wholearm_tools._io import atomic_path, write_bytes_atomic
 from wholearm_tools.errors import InputError, OutputError
-from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap
+from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap, jsonable
 from wholearm_tools.mesh.extent import full_extent
+from wholearm_tools.mesh.style import (
+    UNEXPLAINED_NAME,
+    surface_colour,
+    surface_label,
+    surface_name,
+)
 from wholearm_tools.mesh.tessellate import DEFAULT_RESOLUTION, extrude, polyline, tessellate
 from wholearm_tools.mesh.triangle_mesh import TriangleMesh, merge_meshes
 from wholearm_tools.mesh.unexplained import unexplained_mesh
@@ -36,6 +57,40 @@ log = logging.getLogger(__name__)
 DEFAULT_HEIGHT = 0.1
 
 PLANAR_KINDS = ("line", "circle")
+
+#: rotation of the robot base frame (z up) into glTF's frame (+Y up): (x, y, z) -> (x, z, -y)
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0, 0.0],
+                         [0.0, 0.0, 1.0, 0.0],
+                         [0.0, -1.0, 0.0, 0.0],
+                         [0.0, 0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMesh:
+    """One named surface of a map, as the files keep it apart.
+
+    Attributes
+    ----------
+    name : str
+        Node / group name (``primitive-<id>-<type>`` or ``unexplained``).
+    primitive_id : int
+        The primitive's id in map.json; -1 for the surface through the unexplained contacts.
+    kind : str
+        Primitive type, or ``"free-form"``.
+    mesh : TriangleMesh
+        Vertices in the map frame (robot base frame), metres.
+    colour : (3,) float
+        RGB in [0, 1] (:func:`~wholearm_tools.mesh.style.surface_colour`).
+    metadata : dict
+        JSON-ready description written with the part (glTF node ``extras``).
+    """
+
+    name: str
+    primitive_id: int
+    kind: str
+    mesh: TriangleMesh
+    colour: tuple[float, float, float]
+    metadata: dict[str, Any] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -68,19 +123,35 @@ def primitive_mesh(primitive: MappedPrimitive, resolution: float = DEFAULT_RESOL
         raise InputError(f"primitive {primitive.id} ({primitive.kind}): {exc}") from None
 
 
+def primitive_metadata(primitive: MappedPrimitive) -> dict[str, Any]:
+    """What a file says about one primitive: type, id, parameters (map.json names, metres and
+    radians, robot base frame), 95 % half-widths, support and RMS residual."""
+    return jsonable({
+        "id": primitive.id, "type": primitive.kind,
+        "label": surface_label(primitive.id, primitive.kind), "params": primitive.params,
+        "ci95": primitive.ci95, "support": primitive.support,
+        "rms_residual": primitive.rms_residual, "frame": "map (robot base frame), metres",
+    })
+
+
 def map_meshes(surface_map: SurfaceMap, resolution: float = DEFAULT_RESOLUTION,
                height: float = DEFAULT_HEIGHT, include_unexplained: bool = True
-               ) -> list[tuple[str, TriangleMesh]]:
-    """Named meshes of a map: ``("primitive/<id>", mesh)`` per primitive, then
-    ``("unexplained", mesh)`` when the unexplained contacts of a 3-D map could be meshed."""
-    named = [(f"primitive/{p.id}", primitive_mesh(p, resolution, height))
+               ) -> list[SurfaceMesh]:
+    """The named surfaces of a map: one per primitive (in map order), then ``unexplained``
+    when the unexplained contacts of a 3-D map could be meshed."""
+    parts = [SurfaceMesh(surface_name(p.id, p.kind), p.id, p.kind,
+                         primitive_mesh(p, resolution, height), surface_colour(p.id),
+                         primitive_metadata(p))
              for p in surface_map.primitives]
     if include_unexplained and not surface_map.planar and len(surface_map.unexplained):
         pts = np.ascontiguousarray(surface_map.unexplained, dtype=float)
         surface = _unexplained_surface(pts.tobytes(), pts.shape)
         if surface:
-            named.append(("unexplained", surface.mesh))
-    return named
+            parts.append(SurfaceMesh(
+                UNEXPLAINED_NAME, -1, "free-form", surface.mesh, surface_colour(-1),
+                {"id": -1, "type": "free-form", "label": surface_label(-1, ""),
+                 "method": surface.method, "n_points": len(pts)}))
+    return parts
 
 
 @functools.lru_cache(maxsize=8)
@@ -109,99 +180,165 @@ def map_mesh(surface_map: SurfaceMap, resolution: float = DEFAULT_RESOLUTION,
         Also mesh ``surface_map.unexplained`` (3-D maps; skipped with a logged reason when too
         few points).
     """
-    return merge_meshes(m for _, m in map_meshes(surface_map, resolution, height,
-                                                  include_unexplained))
+    return merge_meshes(part.mesh for part in map_meshes(surface_map, resolution, height,
+                                                         include_unexplained))
+
+
+def map_scene_metadata(surface_map: SurfaceMap) -> dict[str, Any]:
+    """The map-level description the mesh files carry (glTF scene ``extras``)."""
+    meta = surface_map.meta or {}
+    return jsonable({
+        "format": "wholearm-map-mesh", "frame": surface_map.frame, "B": surface_map.B,
+        "planar": surface_map.planar, "units": "m",
+        "tool": meta.get("tool", {"name": "wholearm_tools", "version": __version__}),
+        **{k: meta[k] for k in ("created", "input") if k in meta},
+    })
 
 
 # ---------------------------------------------------------------------------------------------
-# atomic file helpers
+# mesh writers (trimesh; VTP with pyvista)
 
 
-# ---------------------------------------------------------------------------------------------
-# mesh writers
+def _rgba8(colour: Sequence[float]) -> np.ndarray:
+    return np.round(255.0 * np.clip(np.append(np.asarray(colour, float)[:3], 1.0), 0, 1)
+                    ).astype(np.uint8)
 
 
-def _to_open3d(mesh: TriangleMesh) -> Any:
-    import open3d as o3d
+def _trimesh(part: SurfaceMesh, material: bool) -> Any:
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
 
-    out = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(mesh.vertices)),
-                                    o3d.utility.Vector3iVector(mesh.triangles.astype(np.int32)))
-    out.compute_triangle_normals()
-    out.compute_vertex_normals()
-    return out
-
-
-def _write_open3d(mesh: TriangleMesh, path: Path, suffix: str) -> None:
-    import open3d as o3d
-
-    o3d_mesh = _to_open3d(mesh)
-    with atomic_path(path, suffix) as tmp, \
-            o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        ok = o3d.io.write_triangle_mesh(str(tmp), o3d_mesh, write_ascii=False,
-                                        write_vertex_normals=suffix != ".stl")
-        if not ok:
-            raise OutputError(f"{path}: open3d could not write the {suffix[1:].upper()} file")
+    mesh = trimesh.Trimesh(vertices=np.array(part.mesh.vertices),
+                           faces=np.array(part.mesh.triangles), process=False,
+                           validate=False)
+    if material:
+        mesh.visual = TextureVisuals(material=PBRMaterial(
+            name=part.name, baseColorFactor=_rgba8(part.colour), metallicFactor=0.0,
+            roughnessFactor=0.7, doubleSided=True))
+    mesh.metadata = {"name": part.name}
+    return mesh
 
 
-def glb_from_gltf(gltf: dict[str, Any]) -> bytes:
-    """Binary glTF (GLB) from a glTF document whose buffers are base64 data URIs.
+def _scene(parts: Sequence[SurfaceMesh], frame: str, scene_meta: Mapping[str, Any],
+           y_up: bool, material: bool) -> Any:
+    """A trimesh scene: a root node named ``frame`` (turned to +Y up when ``y_up``) with one
+    child node per part, the part's metadata on the node."""
+    import trimesh
 
-    open3d 0.20 writes ``.glb`` files that keep the buffer as a data URI and have no BIN chunk,
-    which common readers (assimp, hence open3d itself) reject; this packs the buffers into the
-    standard BIN chunk.
-    """
-    doc = json.loads(json.dumps(gltf))  # deep copy
-    blob = bytearray()
-    starts: list[int] = []
-    for buf in doc.get("buffers", []):
-        uri = buf.get("uri", "")
-        head, sep, data = uri.partition(",")
-        if not (sep and head.startswith("data:") and head.endswith(";base64")):
-            raise OutputError(f"cannot pack glTF buffer with uri {uri[:40]!r} into a GLB")
-        raw = base64.b64decode(data)
-        starts.append(len(blob))
-        blob += raw + b"\0" * (-len(raw) % 4)
-    for view in doc.get("bufferViews", []):
-        view["byteOffset"] = starts[view.get("buffer", 0)] + view.get("byteOffset", 0)
-        view["buffer"] = 0
-    doc["buffers"] = [{"byteLength": len(blob)}] if blob else []
-    body = json.dumps(doc, separators=(",", ":"), sort_keys=True).encode("utf-8")
-    body += b" " * (-len(body) % 4)
-    chunks = struct.pack("<I4s", len(body), b"JSON") + body
-    if blob:
-        chunks += struct.pack("<I4s", len(blob), b"BIN\0") + bytes(blob)
-    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
+    scene = trimesh.Scene(base_frame="world")
+    scene.graph.update(frame_to=frame, frame_from="world",
+                       matrix=Z_UP_TO_Y_UP if y_up else np.eye(4),
+                       metadata={"description": f"robot base frame {frame!r}"
+                                 + (", turned from z up to glTF's +Y up" if y_up else "")})
+    for part in parts:
+        scene.add_geometry(_trimesh(part, material), geom_name=part.name, node_name=part.name,
+                           parent_node_name=frame, metadata=dict(part.metadata))
+    scene.metadata = {"wholearm": dict(scene_meta)}
+    return scene
 
 
-def _write_glb(mesh: TriangleMesh, path: Path, suffix: str) -> None:
-    import open3d as o3d
+#: glTF bufferView targets: vertex attributes and triangle indices
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
-    o3d_mesh = _to_open3d(mesh)
-    with tempfile.TemporaryDirectory(prefix="wholearm-glb-") as folder:
-        gltf_path = Path(folder) / "mesh.gltf"
-        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-            ok = o3d.io.write_triangle_mesh(str(gltf_path), o3d_mesh)
-        if not ok:
-            raise OutputError(f"{path}: open3d could not write the glTF data")
-        data = glb_from_gltf(json.loads(gltf_path.read_text(encoding="utf-8")))
+
+def _tidy_gltf(tree: dict[str, Any]) -> None:
+    """Declare every bufferView's target (vertex data or indices) and name the generator."""
+    targets: dict[int, int] = {}
+    accessors = tree.get("accessors", [])
+    for mesh in tree.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            for acc in prim.get("attributes", {}).values():
+                targets[accessors[acc]["bufferView"]] = _ARRAY_BUFFER
+            if "indices" in prim:
+                targets[accessors[prim["indices"]]["bufferView"]] = _ELEMENT_ARRAY_BUFFER
+    for i, view in enumerate(tree.get("bufferViews", [])):
+        if i in targets:
+            view["target"] = targets[i]
+    tree["asset"]["generator"] = f"wholearm_tools {__version__} (trimesh)"
+    for mesh in tree.get("meshes", []):
+        mesh.pop("extras", None)     # the part's description sits on its node
+
+
+def _write_gltf(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
+                scene_meta: Mapping[str, Any]) -> None:
+    from trimesh.exchange.gltf import export_glb, export_gltf
+
+    scene = _scene(parts, frame, scene_meta, y_up=True, material=True)
+    if fmt == "glb":
+        data = export_glb(scene, include_normals=True, tree_postprocessor=_tidy_gltf)
+    else:   # trimesh builds a .gltf's bufferViews after its post-processor: tidy afterwards
+        tree = json.loads(export_gltf(scene, include_normals=True, embed_buffers=True,
+                                      merge_buffers=True)["model.gltf"])
+        _tidy_gltf(tree)
+        data = json.dumps(tree, separators=(",", ":")).encode("utf-8")
     write_bytes_atomic(path, data)
 
 
-def _write_vtp(mesh: TriangleMesh, path: Path, suffix: str) -> None:
+def _write_obj(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
+               scene_meta: Mapping[str, Any]) -> None:
+    from trimesh.exchange.obj import export_obj
+
+    scene = _scene(parts, frame, scene_meta, y_up=False, material=False)
+    text = export_obj(scene, include_normals=False, include_color=False, include_texture=False,
+                      digits=9, header=f"wholearm map, frame {frame} (z up), metres")
+    lines = []
+    for line in text.splitlines():
+        lines.append(line)
+        if line.startswith("o "):
+            lines.append("g " + line[2:])       # a group too: some readers only know groups
+    write_bytes_atomic(path, ("\n".join(lines) + "\n").encode("utf-8"))
+
+
+def _merged(parts: Sequence[SurfaceMesh]) -> tuple[TriangleMesh, np.ndarray, np.ndarray]:
+    """Merged mesh, per-face primitive id (int32) and per-face RGBA colour (uint8)."""
+    merged = merge_meshes(part.mesh for part in parts)
+    ids = np.concatenate([np.full(p.mesh.n_triangles, p.primitive_id, np.int32)
+                          for p in parts]) if parts else np.zeros(0, np.int32)
+    rgba = np.concatenate([np.tile(_rgba8(p.colour), (p.mesh.n_triangles, 1))
+                           for p in parts]) if parts else np.zeros((0, 4), np.uint8)
+    return merged, ids, rgba
+
+
+def _write_ply_stl(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
+                   scene_meta: Mapping[str, Any]) -> None:
+    import trimesh
+    from trimesh.exchange.ply import export_ply
+    from trimesh.exchange.stl import export_stl
+
+    merged, ids, rgba = _merged(parts)
+    mesh = trimesh.Trimesh(vertices=np.array(merged.vertices), faces=np.array(merged.triangles),
+                           process=False, validate=False)
+    if fmt == "stl":
+        data = export_stl(mesh)
+    else:
+        mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=rgba)
+        mesh.face_attributes["primitive_id"] = ids
+        data = export_ply(mesh, encoding="binary", vertex_normal=False, include_attributes=True)
+    write_bytes_atomic(path, data)
+
+
+def _write_vtp(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
+               scene_meta: Mapping[str, Any]) -> None:
     import pyvista as pv
 
-    poly = pv.PolyData.from_regular_faces(np.asarray(mesh.vertices),
-                                          np.asarray(mesh.triangles))
-    with atomic_path(path, suffix) as tmp:
+    merged, ids, rgba = _merged(parts)
+    poly = pv.PolyData.from_regular_faces(np.asarray(merged.vertices),
+                                          np.asarray(merged.triangles))
+    poly.cell_data["primitive_id"] = ids
+    poly.cell_data["colour"] = rgba[:, :3]
+    poly.field_data["surface_names"] = np.array([p.name for p in parts])
+    poly.field_data["surface_ids"] = np.array([p.primitive_id for p in parts], np.int32)
+    with atomic_path(path, ".vtp") as tmp:
         poly.save(str(tmp), binary=True)
 
 
-MeshWriter = Callable[[TriangleMesh, Path, str], None]
+MeshWriter = Callable[[Sequence[SurfaceMesh], Path, str, str, Mapping[str, Any]], None]
 
 #: mesh writers by format name
 MESH_FORMATS: dict[str, MeshWriter] = {
-    "ply": _write_open3d, "stl": _write_open3d, "obj": _write_open3d, "gltf": _write_open3d,
-    "glb": _write_glb, "vtp": _write_vtp,
+    "ply": _write_ply_stl, "stl": _write_ply_stl, "obj": _write_obj, "gltf": _write_gltf,
+    "glb": _write_gltf, "vtp": _write_vtp,
 }
 #: drawing formats of planar maps
 DRAWING_FORMATS = ("svg", "png")
@@ -214,18 +351,51 @@ def _format_of(path: Path, fmt: str | None, known: tuple[str, ...]) -> str:
     return name
 
 
-def export_mesh(mesh: TriangleMesh, path: str | os.PathLike[str],
-                format: str | None = None) -> Path:
-    """Write ``mesh`` to ``path`` as PLY, STL, OBJ, glTF, GLB or VTP, atomically.
+def export_mesh(mesh: TriangleMesh | Sequence[SurfaceMesh], path: str | os.PathLike[str],
+                format: str | None = None, *, frame: str = "base_link",
+                metadata: Mapping[str, Any] | None = None) -> Path:
+    """Write a mesh, or the named surfaces of a map, as PLY, STL, OBJ, glTF, GLB or VTP.
 
-    ``format`` defaults to the file's extension.  Returns the path written.
+    Parameters
+    ----------
+    mesh : TriangleMesh or sequence of SurfaceMesh
+        One anonymous mesh (written as one part named ``mesh``) or the parts of
+        :func:`map_meshes`, kept apart as the module docstring says.
+    path : path
+        Output file (written atomically); ``format`` defaults to its extension.
+    frame : str
+        Name of the vertices' frame (the map frame), the root node of glTF files.
+    metadata : mapping, optional
+        JSON-ready description of the whole file (glTF scene ``extras["wholearm"]``).
+
+    Returns
+    -------
+    Path
+        The path written.
     """
     path = Path(path)
     fmt = _format_of(path, format, tuple(MESH_FORMATS))
-    if mesh.is_empty:
+    if isinstance(mesh, TriangleMesh):
+        parts: list[SurfaceMesh] = [SurfaceMesh("mesh", -1, "mesh", mesh, surface_colour(-1))]
+    else:
+        parts = [p for p in mesh if not p.mesh.is_empty]
+    if not parts or all(p.mesh.is_empty for p in parts):
         raise InputError(f"{path}: nothing to export (the mesh has no triangles)")
-    MESH_FORMATS[fmt](mesh, path, f".{fmt}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: output folder {folder} does not exist")
+    MESH_FORMATS[fmt](parts, path, fmt, frame, dict(metadata or {}))
     return path
+
+
+def export_map(surface_map: SurfaceMap, path: str | os.PathLike[str], format: str | None = None,
+               *, resolution: float = DEFAULT_RESOLUTION, height: float = DEFAULT_HEIGHT,
+               include_unexplained: bool = True) -> Path:
+    """Mesh ``surface_map`` (:func:`map_meshes`) and write it with :func:`export_mesh`, one
+    named part per surface, the map's description in the file."""
+    parts = map_meshes(surface_map, resolution, height, include_unexplained)
+    return export_mesh(parts, path, format, frame=surface_map.frame,
+                       metadata=map_scene_metadata(surface_map))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -272,10 +442,9 @@ def export_drawing(surface_map: SurfaceMap, path: str | os.PathLike[str],
     with mpl.rc_context({"svg.hashsalt": "wholearm", "path.simplify": False}):
         fig = Figure(figsize=(6.0, 6.0), dpi=150)
         ax = fig.add_subplot()
-        colours = mpl.colormaps["tab10"].colors
-        for i, (prim, pts) in enumerate(curves):
-            ax.plot(pts[:, 0], pts[:, 1], "-", lw=2.0, color=colours[i % len(colours)],
-                    label=f"#{prim.id} {prim.kind}")
+        for prim, pts in curves:
+            ax.plot(pts[:, 0], pts[:, 1], "-", lw=2.0, color=surface_colour(prim.id),
+                    label=surface_label(prim.id, prim.kind))
         if len(surface_map.unexplained):
             u = surface_map.unexplained
             ax.plot(u[:, 0], u[:, 1], "x", color="0.4", ms=5, label="unexplained")
@@ -292,4 +461,3 @@ def export_drawing(surface_map: SurfaceMap, path: str | os.PathLike[str],
         with atomic_path(path, f".{fmt}") as tmp:
             fig.savefig(tmp, format=fmt, metadata=metadata)
     return path
-

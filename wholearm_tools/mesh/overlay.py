@@ -1,20 +1,34 @@
-"""Foxglove overlay of a map: one ``foxglove.SceneUpdate`` (JSON encoding) in an MCAP file.
+"""Foxglove overlay of a reconstruction: an MCAP file (JSON encoding) to open beside the run.
 
-Open it next to the run in Foxglove (or Lichtblick): the 3D panel shows, in frame ``base_link``
-(the map's frame), every primitive as a triangle list over its extent, the surface through the
-unexplained contacts, tip contacts as spheres coloured by P_T (blue = link, red = tip) and link
-contacts as line segments.  Same inputs → same bytes.
+Channels, all on the run's clock (``t0_ns`` = the log's first sample, contact times from the
+contact table):
+
+``/tf`` (``foxglove.FrameTransform``)
+    one transform at ``t0_ns``: the map frame (the robot base frame, e.g. ``base_link``) placed
+    at the origin of ``world``, so the 3D panel has a frame to show the overlay in; a log that
+    already places the base frame keeps its own tree (the transform is the identity).
+``/wholearm/map`` (``foxglove.SceneUpdate``)
+    one message at ``t0_ns``: every primitive as a triangle list over its extent, in its fixed
+    colour (:mod:`wholearm_tools.mesh.style`) with its type, id, parameters and RMS residual
+    in the entity metadata, and the surface through the unexplained contacts.
+``/wholearm/contacts`` (``foxglove.SceneUpdate``)
+    one message per contact at the contact's own time: a tip contact as a sphere (the tip or
+    joint sphere), a link contact as the link's axis segment, coloured by P_T (blue = link body,
+    red = tip), with time, link, label, P_T and primitive in the metadata.  Entities never
+    expire, so scrubbing the timeline shows the contacts gathered up to that time.
+
+Same inputs → same bytes.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from wholearm_tools import __version__
 from wholearm_tools._io import atomic_path
@@ -24,7 +38,12 @@ from wholearm_tools.mesh.export import DEFAULT_HEIGHT, map_meshes
 from wholearm_tools.mesh.triangle_mesh import TriangleMesh
 
 TOPIC = "/wholearm/map"
+CONTACTS_TOPIC = "/wholearm/contacts"
+TF_TOPIC = "/tf"
 SCHEMA_NAME = "foxglove.SceneUpdate"
+TF_SCHEMA_NAME = "foxglove.FrameTransform"
+#: parent frame of the map frame in ``/tf``
+WORLD_FRAME = "world"
 #: default tessellation resolution of the overlay (coarser than file exports: JSON is verbose)
 OVERLAY_RESOLUTION = 0.02
 #: diameter of the tip-contact spheres, metres
@@ -57,15 +76,16 @@ def _vec3(title: str = "foxglove.Vector3") -> dict[str, Any]:
     return _obj(title, {"x": _num(), "y": _num(), "z": _num()})
 
 
+def _quaternion() -> dict[str, Any]:
+    return _obj("foxglove.Quaternion", {"x": _num(), "y": _num(), "z": _num(), "w": _num()})
+
+
 def _color() -> dict[str, Any]:
     return _obj("foxglove.Color", {"r": _num(), "g": _num(), "b": _num(), "a": _num()})
 
 
 def _pose() -> dict[str, Any]:
-    return _obj("foxglove.Pose", {
-        "position": _vec3(),
-        "orientation": _obj("foxglove.Quaternion",
-                            {"x": _num(), "y": _num(), "z": _num(), "w": _num()})})
+    return _obj("foxglove.Pose", {"position": _vec3(), "orientation": _quaternion()})
 
 
 def _array(items: dict[str, Any]) -> dict[str, Any]:
@@ -101,6 +121,16 @@ def scene_update_schema() -> dict[str, Any]:
     return schema
 
 
+def frame_transform_schema() -> dict[str, Any]:
+    """JSON schema of ``foxglove.FrameTransform`` (field names as Foxglove)."""
+    schema = _obj(TF_SCHEMA_NAME, {
+        "timestamp": _time(), "parent_frame_id": {"type": "string"},
+        "child_frame_id": {"type": "string"}, "translation": _vec3(),
+        "rotation": _quaternion()})
+    schema["description"] = "A transform between two reference frames in 3D space"
+    return schema
+
+
 # ---------------------------------------------------------------------------------------------
 # message building
 
@@ -121,8 +151,6 @@ def p_tip_color(p: float) -> dict[str, float]:
     return _rgba(p, 0.15, 1.0 - p)
 
 
-_PALETTE = ((0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17), (0.58, 0.4, 0.74),
-            (0.55, 0.34, 0.29), (0.89, 0.47, 0.76), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81))
 _IDENTITY = {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
              "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
 
@@ -152,76 +180,85 @@ def _lift(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-def scene_update(surface_map: SurfaceMap, contact_points: ArrayLike | None = None,
-                 contact_p_tip: ArrayLike | None = None,
-                 contact_segments: ArrayLike | None = None, t0_ns: int = 0,
-                 resolution: float = OVERLAY_RESOLUTION,
-                 height: float = DEFAULT_HEIGHT) -> dict[str, Any]:
-    """The ``foxglove.SceneUpdate`` message (a JSON-ready dict) of :func:`write_overlay`.
+def _stamp(t_ns: int) -> dict[str, int]:
+    return {"sec": int(t_ns) // 1_000_000_000, "nsec": int(t_ns) % 1_000_000_000}
 
-    Entities, in order: ``primitive/<id>`` per primitive, ``unexplained`` (when the unexplained
-    contacts could be meshed), ``contacts/tip`` (when ``contact_points`` is given and non-empty)
-    and ``contacts/link`` (when ``contact_segments`` is given and non-empty).
-    """
+
+def scene_update(surface_map: SurfaceMap, t0_ns: int = 0, resolution: float = OVERLAY_RESOLUTION,
+                 height: float = DEFAULT_HEIGHT) -> dict[str, Any]:
+    """The map's ``foxglove.SceneUpdate`` (a JSON-ready dict): one entity per surface of
+    :func:`~wholearm_tools.mesh.export.map_meshes`, named as in the mesh files."""
     if int(t0_ns) < 0:
         raise InputError(f"overlay time must be >= 0 ns, got {t0_ns}")
-    dim = surface_map.dim
-    stamp = {"sec": int(t0_ns) // 1_000_000_000, "nsec": int(t0_ns) % 1_000_000_000}
-    frame = surface_map.frame
-    kinds = {f"primitive/{p.id}": p for p in surface_map.primitives}
+    stamp = _stamp(t0_ns)
     entities = []
-    for i, (name, mesh) in enumerate(map_meshes(surface_map, resolution, height)):
-        prim = kinds.get(name)
-        meta = {"kind": prim.kind, "id": str(prim.id),
-                "rms_residual": f"{prim.rms_residual:.6g}"} if prim else {"kind": "free-form"}
-        colour = _rgba(*_PALETTE[i % len(_PALETTE)], 0.8) if prim else _rgba(0.6, 0.6, 0.6, 0.6)
-        entities.append(_entity(name, frame, stamp, meta,
-                                triangles=[_triangle_list(mesh, colour)]))
-    if contact_points is not None:
-        pts = np.asarray(contact_points, dtype=float)
-        if pts.size == 0:
-            pts = pts.reshape(0, dim)
-        if pts.ndim != 2 or pts.shape[1] != dim or not np.all(np.isfinite(pts)):
-            raise InputError(f"expected finite contact points of shape (N, {dim}), got "
-                             f"{np.shape(contact_points)}")
-        if contact_p_tip is None:
-            p_tip = np.full(len(pts), 0.5)
-        else:
-            p_tip = np.asarray(contact_p_tip, dtype=float).ravel()
-            if p_tip.shape != (len(pts),) or not np.all((p_tip >= 0) & (p_tip <= 1)):
-                raise InputError(f"expected contact_p_tip of shape ({len(pts)},) in [0, 1], "
-                                 f"got shape {np.shape(contact_p_tip)}")
-        if len(pts):
-            size = {"x": SPHERE_DIAMETER, "y": SPHERE_DIAMETER, "z": SPHERE_DIAMETER}
-            spheres = [{"pose": {"position": pos, "orientation": _IDENTITY["orientation"]},
-                        "size": size, "color": p_tip_color(p)}
-                       for pos, p in zip(_points3(_lift(pts)), p_tip, strict=True)]
-            entities.append(_entity("contacts/tip", frame, stamp, {"count": str(len(pts))},
-                                    spheres=spheres))
-    elif contact_p_tip is not None:
-        raise InputError("contact_p_tip given without contact_points")
-    if contact_segments is not None:
-        seg = np.asarray(contact_segments, dtype=float)
-        if seg.size == 0:
-            seg = seg.reshape(0, 2, dim)
-        if seg.ndim != 3 or seg.shape[1:] != (2, dim) or not np.all(np.isfinite(seg)):
-            raise InputError(f"expected finite contact segments of shape (M, 2, {dim}), got "
-                             f"{np.shape(contact_segments)}")
-        if len(seg):
-            line = {"type": 2, "pose": _IDENTITY, "thickness": LINE_THICKNESS,
-                    "scale_invariant": False, "points": _points3(_lift(seg).reshape(-1, 3)),
-                    "color": _rgba(1.0, 0.55, 0.0), "colors": [], "indices": []}
-            entities.append(_entity("contacts/link", frame, stamp, {"count": str(len(seg))},
-                                    lines=[line]))
+    for part in map_meshes(surface_map, resolution, height):
+        alpha = 0.8 if part.primitive_id >= 0 else 0.6
+        meta = {k: (v if isinstance(v, str) else json.dumps(v, separators=(",", ":")))
+                for k, v in part.metadata.items()}
+        entities.append(_entity(part.name, surface_map.frame, stamp, meta,
+                                triangles=[_triangle_list(part.mesh, _rgba(*part.colour,
+                                                                           alpha))]))
     return {"deletions": [], "entities": entities}
 
 
-def write_overlay(path: str | os.PathLike[str], surface_map: SurfaceMap,
-                  contact_points: ArrayLike | None = None,
-                  contact_p_tip: ArrayLike | None = None,
-                  contact_segments: ArrayLike | None = None, t0_ns: int = 0,
-                  resolution: float = OVERLAY_RESOLUTION) -> Path:
-    """Write the map overlay MCAP (channel ``/wholearm/map``, one SceneUpdate at ``t0_ns``).
+def _float_text(x: float) -> str:
+    return f"{float(x):.6g}" if np.isfinite(x) else ""
+
+
+def contact_updates(table: Any, frame: str, t0_ns: int = 0
+                    ) -> list[tuple[int, dict[str, Any]]]:
+    """One ``(log time [ns], foxglove.SceneUpdate)`` per contact of ``table`` (a
+    :class:`~wholearm_tools.contact_table.ContactTable`), in time order: entity
+    ``contact/<k>`` (k = the table row), a sphere for a contact used as a tip contact, the link's
+    axis segment otherwise, coloured by P_T."""
+    if int(t0_ns) < 0:
+        raise InputError(f"overlay time must be >= 0 ns, got {t0_ns}")
+    n = len(table)
+    if n == 0:
+        return []
+    t = np.asarray(table.t, float)
+    times = int(t0_ns) + np.round(t * 1e9).astype(np.int64)
+    if np.any(times < 0):
+        raise InputError(f"contact times must not precede the log start, got t = {t.min()} s")
+    tips = _points3(_lift(np.asarray(table.tip_center, float)))
+    a = _points3(_lift(np.asarray(table.seg_a, float)))
+    b = _points3(_lift(np.asarray(table.seg_b, float)))
+    out = []
+    for k in np.argsort(times, kind="stable"):
+        k = int(k)
+        colour = p_tip_color(float(table.p_tip[k]))
+        meta = {"t": f"{t[k]:.6f}", "link": str(int(table.link[k])),
+                "label": str(table.label[k]), "p_tip": _float_text(table.p_tip[k]),
+                "label_map": str(table.label_map[k]),
+                "p_tip_map": _float_text(table.p_tip_map[k]),
+                "used_as": "tip" if table.used_as_tip[k] else "link",
+                "primitive": str(int(table.primitive[k]))}
+        stamp = _stamp(int(times[k]))
+        if table.used_as_tip[k]:
+            d = max(2.0 * float(table.tip_radius[k]), SPHERE_DIAMETER)
+            prims = {"spheres": [{"pose": {"position": tips[k],
+                                           "orientation": _IDENTITY["orientation"]},
+                                  "size": {"x": d, "y": d, "z": d}, "color": colour}]}
+        else:
+            prims = {"lines": [{"type": 2, "pose": _IDENTITY, "thickness": LINE_THICKNESS,
+                                "scale_invariant": False, "points": [a[k], b[k]],
+                                "color": colour, "colors": [], "indices": []}]}
+        out.append((int(times[k]), {"deletions": [], "entities": [
+            _entity(f"contact/{k}", frame, stamp, meta, **prims)]}))
+    return out
+
+
+def frame_transform(frame: str, t0_ns: int = 0) -> dict[str, Any]:
+    """The ``/tf`` message: ``frame`` at the origin of :data:`WORLD_FRAME`."""
+    return {"timestamp": _stamp(t0_ns), "parent_frame_id": WORLD_FRAME,
+            "child_frame_id": frame, "translation": {"x": 0.0, "y": 0.0, "z": 0.0},
+            "rotation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
+
+
+def write_overlay(path: str | os.PathLike[str], surface_map: SurfaceMap, table: Any = None, *,
+                  t0_ns: int = 0, resolution: float = OVERLAY_RESOLUTION) -> Path:
+    """Write the overlay MCAP of a map and its contacts (see the module docstring).
 
     Parameters
     ----------
@@ -229,30 +266,36 @@ def write_overlay(path: str | os.PathLike[str], surface_map: SurfaceMap,
         Output ``.mcap`` file (written atomically).
     surface_map : SurfaceMap
         The map; its frame is the entities' ``frame_id``.
-    contact_points : (N, d) float, optional
-        Tip-contact points (d = 2 for planar maps, drawn at z = 0), as spheres.
-    contact_p_tip : (N,) float, optional
-        Their tip probability P_T in [0, 1], the spheres' colour (grey-purple 0.5 if absent).
-    contact_segments : (M, 2, d) float, optional
-        Link contacts as segments (e.g. the link in contact), drawn as a line list.
+    table : ContactTable, optional
+        The contacts, each drawn at its own time (``table.t`` seconds after ``t0_ns``).
     t0_ns : int
-        Log and publish time of the message, and the entities' timestamp (ns).
+        Absolute time of the log's first sample (``JointLog.t0_ns``), nanoseconds.
     resolution : float
         Tessellation resolution, metres.
     """
     from mcap.writer import CompressionType, Writer
 
-    message = scene_update(surface_map, contact_points, contact_p_tip, contact_segments, t0_ns,
-                           resolution)
-    data = json.dumps(message, separators=(",", ":")).encode("utf-8")
-    schema = json.dumps(scene_update_schema(), separators=(",", ":")).encode("utf-8")
+    pack = functools.partial(json.dumps, separators=(",", ":"))
+    frame = surface_map.frame
+    messages = [(TF_TOPIC, int(t0_ns), frame_transform(frame, t0_ns)),
+                (TOPIC, int(t0_ns), scene_update(surface_map, t0_ns, resolution))]
+    if table is not None:
+        messages += [(CONTACTS_TOPIC, t, m) for t, m in contact_updates(table, frame, t0_ns)]
     path = Path(path)
     with atomic_path(path, ".mcap") as tmp, open(tmp, "wb") as stream:
         writer = Writer(stream, compression=CompressionType.ZSTD)
         writer.start(profile="", library=f"wholearm_tools {__version__}")
-        schema_id = writer.register_schema(SCHEMA_NAME, "jsonschema", schema)
-        channel_id = writer.register_channel(TOPIC, "json", schema_id)
-        writer.add_message(channel_id, log_time=int(t0_ns), data=data,
-                           publish_time=int(t0_ns), sequence=0)
+        scene_id = writer.register_schema(SCHEMA_NAME, "jsonschema",
+                                          pack(scene_update_schema()).encode("utf-8"))
+        tf_id = writer.register_schema(TF_SCHEMA_NAME, "jsonschema",
+                                       pack(frame_transform_schema()).encode("utf-8"))
+        channels = {topic: writer.register_channel(topic, "json",
+                                                   tf_id if topic == TF_TOPIC else scene_id)
+                    for topic in (TF_TOPIC, TOPIC, CONTACTS_TOPIC)}
+        sequence = dict.fromkeys(channels, 0)
+        for topic, t_ns, message in messages:
+            writer.add_message(channels[topic], log_time=t_ns, publish_time=t_ns,
+                               data=pack(message).encode("utf-8"), sequence=sequence[topic])
+            sequence[topic] += 1
         writer.finish()
     return path

@@ -74,7 +74,10 @@ def unexplained_mesh(points: ArrayLike, knn: int = 10) -> SurfaceReconstruction:
     if sv[1] <= 1e-9 * max(sv[0], 1e-300):
         return _failed(f"the {pts.shape[0]} points are collinear: they span no surface")
 
-    import open3d as o3d
+    try:
+        import open3d as o3d
+    except ImportError as exc:      # open3d is optional: only this surface needs it
+        return _failed(f"open3d is not available ({exc})")
 
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))

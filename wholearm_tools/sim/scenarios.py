@@ -12,6 +12,8 @@ Scenario file (``datasets/<name>.yaml``)::
     strategy: {name: random, lower: [...], upper: [...]}   # name + strategy parameters
     controller: {speed: 0.8, dwell: 0.1}                   # sim.Controller fields
     sensors: {counts_per_rev: 131072}                      # sim.Sensors fields
+    physics: {friction: 0.4, gravity: false}               # sim.physics.Physics fields
+                                                           #   (the physics engine only)
     defaults: {duration: 60, rate: 500, seed: 0}
     hints: {B: 0.02}                                       # stored in the ground-truth meta
 
@@ -31,6 +33,7 @@ from numpy.typing import NDArray
 
 from wholearm_tools.errors import RobotModelError, ScenarioError, WholearmError
 from wholearm_tools.robot.model import RobotModel
+from wholearm_tools.sim.physics import ENGINES, Physics, simulate_physics
 from wholearm_tools.sim.simulator import Controller, ProgressCallback, Sensors, SimResult, simulate
 from wholearm_tools.sim.strategies import STRATEGIES
 
@@ -40,7 +43,7 @@ FloatArray = NDArray[np.float64]
 DATASETS = Path(__file__).resolve().parents[2] / "datasets"
 
 _KEYS = {"name", "description", "robot", "home", "environment", "strategy", "controller",
-         "sensors", "defaults", "hints"}
+         "sensors", "physics", "defaults", "hints"}
 
 
 def datasets_dir() -> Path:
@@ -65,6 +68,7 @@ class Scenario:
     seed: int
     hints: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    physics: Physics = field(default_factory=Physics)
 
     @property
     def dof(self) -> int:
@@ -85,18 +89,31 @@ class Scenario:
 
     def simulate(self, *, seed: int | None = None, duration: float | None = None,
                  rate: float | None = None, strategy: str | None = None,
-                 progress: ProgressCallback | None = None) -> SimResult:
-        """Run the scenario; ``None`` arguments take the scenario's defaults."""
+                 progress: ProgressCallback | None = None, engine: str = "kinematic",
+                 physics: Physics | None = None) -> SimResult:
+        """Run the scenario; ``None`` arguments take the scenario's defaults.
+
+        ``engine`` is ``"kinematic"`` (default) or ``"physics"`` (MuJoCo); ``physics``
+        replaces the scenario's physical parameters (the physics engine only).
+        """
+        if engine not in ENGINES:
+            raise ScenarioError(f"unknown engine {engine!r} (known: {', '.join(ENGINES)})")
         seed = self.seed if seed is None else seed
         name = self.strategy if strategy is None else strategy
         params = self.strategy_params if name == self.strategy else _box_only(
             self.strategy_params)
         meta = {"scenario": self.name, **dict(self.hints.items())}
-        return simulate(
-            self.robot, self.obstacles, strategy=name, strategy_params=params,
-            duration=self.duration if duration is None else duration,
-            rate=self.rate if rate is None else rate, seed=seed, home=self.home,
-            controller=self.controller, sensors=self.sensors, progress=progress, meta=meta)
+        common: dict[str, Any] = {
+            "strategy": name, "strategy_params": params,
+            "duration": self.duration if duration is None else duration,
+            "rate": self.rate if rate is None else rate, "seed": seed, "home": self.home,
+            "controller": self.controller, "sensors": self.sensors, "progress": progress,
+            "meta": meta}
+        if engine == "physics":
+            return simulate_physics(self.robot, self.obstacles,
+                                    physics=self.physics if physics is None else physics,
+                                    **common)
+        return simulate(self.robot, self.obstacles, **common)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description for ``wholearm scenarios --json``."""
@@ -202,4 +219,5 @@ def _build(path: Path, data: dict[str, Any]) -> Scenario:
         controller=Controller(**ctrl), sensors=Sensors(**dict(data.get("sensors") or {})),
         duration=float(defaults.get("duration", 60.0)), rate=float(defaults.get("rate", 500.0)),
         seed=int(defaults.get("seed", 0)), hints=dict(data.get("hints") or {}), path=path,
+        physics=Physics(**dict(data.get("physics") or {})),
     )

@@ -174,6 +174,8 @@ class _Contact:
     surface: int
     s: float
     q: FloatArray
+    t_end: float = np.nan  # release: the retreat start
+    force: float = np.nan  # peak normal force from the quasi-static balance
 
 
 class _Recorder:
@@ -324,7 +326,9 @@ def simulate(
         k_hold = int(np.ceil((t_stop + hold) / dt - 1e-9))
         rec.fill(k_hold, move_samples)
         if has_contact:
-            _contact_loads(rec, robot, K, result, delta, t0, k_hold)
+            forces = _contact_loads(rec, robot, K, result, delta, t0, k_hold)
+            for c, f in zip(contacts[first:], forces, strict=True):
+                c.t_end, c.force = rec.time(k_hold), f
         if not has_contact:
             q_end = result.vertices[-1]
             swept = densify(result.vertices, sweep_step, max_lever)
@@ -372,7 +376,11 @@ def simulate(
         contact_point=np.array([c.point for c in contacts], dtype=float).reshape(-1, 3),
         contact_surface=np.array([c.surface for c in contacts], dtype=np.int64),
         contact_s=np.array([c.s for c in contacts], dtype=float),
-        meta={"simulator": "wholearm_tools.sim", "strategy": strat.name,
+        contact_t_end=np.array([c.t_end for c in contacts], dtype=float),
+        contact_force=np.array([c.force for c in contacts], dtype=float),
+        contact_q=np.array([c.q for c in contacts], dtype=float).reshape(-1, n),
+        contact_stopped=np.ones(len(contacts), dtype=bool),
+        meta={"simulator": "wholearm_tools.sim", "engine": "kinematic", "strategy": strat.name,
               "seed": None if isinstance(seed, np.random.SeedSequence) else seed,
               "rate": rate, "duration": duration, "tolerance": tolerance,
               "stiffness": K.tolist(), "damping": D.tolist(), **(meta or {})},
@@ -445,8 +453,9 @@ def _guarded_move(collider: Collider, q0: FloatArray, q1: FloatArray, law: Trape
 
 
 def _contact_loads(rec: _Recorder, robot: RobotModel, K: FloatArray, result: _MoveResult,
-                   delta: FloatArray, t0: float, k_last: int) -> None:
-    """Torques of the *held* joints (not commanded to move) against each contact's force.
+                   delta: FloatArray, t0: float, k_last: int) -> list[float]:
+    """Normal force of each contact of a move, and the torques of the *held* joints (not
+    commanded to move) against it.
 
     A frictionless contact on link ``k`` at surface point ``p`` with unit normal ``nu``
     (surface → robot) pushes with ``F = f nu``; its moment about joint ``i <= k`` is
@@ -457,16 +466,21 @@ def _contact_loads(rec: _Recorder, robot: RobotModel, K: FloatArray, result: _Mo
     ``-f g_i`` — the torque a real controller shows when a joint it holds in place is loaded.
     Positions stay frozen (the kinematic model's rigid stop), so this adds torque only.
     Written into ``rec.load`` from the contact sample to ``k_last`` (the end of the dwell).
+
+    Returns the peak ``f`` of each contact of ``result.contacts`` [N] over that span, NaN where
+    no blocked joint has a moment about it (the balance does not determine the force).
     """
     n = robot.dof
     moving = np.abs(delta) > 1e-12
     joints = np.arange(n)
+    peaks: list[float] = []
     for tc, link, info, qc in result.contacts:
         k0 = int(np.ceil((t0 + tc) / rec.dt - 1e-9))
         k1 = min(k_last, rec.k)
         held = ~moving & (joints <= link)
         blocked = moving & (joints <= link) & (np.abs(result.freeze - tc) <= 1e-12)
-        if k0 > k1 or not held.any() or not blocked.any():
+        peaks.append(np.nan)
+        if k0 > k1 or not blocked.any():
             continue
         pts = robot.joint_positions(qc)
         axes = robot.joint_axes(qc)
@@ -478,7 +492,10 @@ def _contact_loads(rec: _Recorder, robot: RobotModel, K: FloatArray, result: _Mo
         ks = np.arange(k0, k1 + 1)
         tau_b = K[blocked] * (rec.q_cmd[ks][:, blocked] - rec.q[ks][:, blocked])
         f = np.maximum(-(tau_b @ gb) / float(gb @ gb), 0.0)
-        rec.load[np.ix_(ks, np.flatnonzero(held))] -= f[:, None] * g[held][None, :]
+        peaks[-1] = float(f.max())
+        if held.any():
+            rec.load[np.ix_(ks, np.flatnonzero(held))] -= f[:, None] * g[held][None, :]
+    return peaks
 
 
 def _retreat_vertices(collider: Collider, vertices: FloatArray, ctrl: Controller) -> FloatArray:
