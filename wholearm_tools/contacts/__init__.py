@@ -3,11 +3,8 @@
 from wholearm_tools.contacts.detect import (
     Contacts,
     DetectionParams,
-    contact_link_per_sample,
     detect_contacts,
-    estimate_noise,
 )
-from wholearm_tools.contacts.truth import match_truth
+from wholearm_tools.contacts.truth import match_events, match_truth
 
-__all__ = ["Contacts", "DetectionParams", "contact_link_per_sample", "detect_contacts",
-           "estimate_noise", "match_truth"]
+__all__ = ["Contacts", "DetectionParams", "detect_contacts", "match_events", "match_truth"]

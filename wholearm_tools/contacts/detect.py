@@ -1,25 +1,17 @@
-"""Contact detection and link identification from joint velocities and commanded torques.
+"""Contact detection and link identification from the joint signals: one row per contact event.
 
 Only the robot's own signals are used (never ground truth).  The principle (Kaneko & Tanie 1994,
-the paper's section 2): when link ``n`` touches, joints ``0..n`` stop while their commanded torque
-persists; joints beyond ``n`` keep moving as long as torque drives them, and stop with (almost)
-zero torque when they reach their target.  Hence the link in contact is the outermost joint of
-the stopped prefix ``0..n`` that is *blocked* (stopped **and** loaded).
+the paper's section 2): when link ``n`` touches, joints ``0..n`` are obstructed — at rest while
+the controller pushes — and joints beyond ``n`` carry no part of the contact force.  What the
+controller does without contact (friction and bias at rest, inertia, gravity, arrival at a free
+target, unloading on retreat) is learned from the run itself, and a contact is an event from the
+first obstruction until the arm is released, measured where it settles
+(:mod:`wholearm_tools.contacts.events`).
 
-Thresholds come from the log's own noise level (see :func:`estimate_noise`), so the same code
-runs on a 500 Hz simulated log and on a noisier 50 Hz real one:
-
-* velocity noise ``sigma_v[j]``: zero-centred, sigma-clipped MAD of the (lightly smoothed)
-  velocity over the samples where it is compatible with rest, started from the white-noise
-  estimate ``MAD(diff qd) / sqrt(2)`` and floored by the encoder quantum / sample period;
-* torque noise ``sigma_tau[j]``: the same estimator applied to ``tau_cmd`` on the samples where
-  the whole arm is at rest (targets reached and contacts both qualify; the contact torques are the
-  outliers the clipping removes), floored by half the torque resolution (5th percentile of the
-  non-zero sample-to-sample torque steps: a quantised encoder moves the torque in steps of
-  ``K * quantum``).
-
-``stopped = |qd_smooth| < k_velocity * sigma_v``, ``loaded = |tau_cmd| > k_torque * sigma_tau``,
-and a state must last ``max(min_stop_time, min_stop_samples / rate)`` to count.
+Within a rigid group — joints beyond the obstructed one that were at rest and unloaded, so that
+their links moved as one body with it — the joint signals cannot tell which link touched; the
+group's links share a prior from eq. (2)'s admissible boundary mass and the held joints' loads
+(:func:`_choose_rigid`), which the fitted map later weighs.
 """
 
 from __future__ import annotations
@@ -53,27 +45,25 @@ class DetectionParams:
     Parameters
     ----------
     k_velocity : float
-        A joint is *stopped* when its smoothed speed is below ``k_velocity * sigma_v``.
+        A joint is at rest when its smoothed speed is below ``k_velocity * sigma_v``.
     k_torque : float
-        A joint is *loaded* when ``|tau_cmd|`` exceeds ``k_torque * sigma_tau``.
+        A joint at rest is *loaded* when its torque departs from the learned free-motion model
+        by more than the Coulomb friction it can hold there plus ``k_torque`` sigmas of the
+        model's residual (:mod:`wholearm_tools.contacts.events`).
     min_stop_time : float
-        Seconds a contact state must persist (the simulator dwells >= 50 ms).
+        Seconds of obstruction an event needs (and a joint's obstruction, to count).
     min_stop_samples : int
         ... and at least this many samples (guards slow logs).
+    release_time : float
+        Seconds without obstruction that end an event: shorter gaps (a rebound that comes
+        back, a joint unloading for a moment while the tip slides) are bridged.
     smooth_time : float
-        Width in seconds of the centred moving average applied to ``qd`` before thresholding
-        (at least one sample, so a 50 Hz log is not smoothed).
+        Width in seconds of the centred moving average applied to ``qd`` (at least one sample,
+        so a 50 Hz log is not smoothed).
     before_time : float
-        Window in seconds before the stop over which ``qd_before`` is averaged.
-    motion_torque_fraction : float
-        A joint is loaded only when ``|tau_cmd|`` also exceeds this fraction of its median
-        ``|tau_cmd|`` while it moves freely: a contact torque builds up beyond the motion
-        torque, while a joint creeping near its target carries a torque that is far above the
-        (tiny) noise yet far below the motion level.  A *held* joint (at rest and unloaded
-        before the stop) is not creeping: its load counts once it stands ``k_torque`` standard
-        errors clear of zero (:func:`_raise_to_loaded_held`).
+        Window in seconds before the first obstruction over which ``qd_before`` is averaged.
     rigid_outer : bool
-        When the joints beyond the stopped link were at rest and unloaded (a single-joint
+        When the joints beyond the obstructed link were at rest and unloaded (a single-joint
         move), links ``n..m`` moved as one rigid body and the joint signals cannot tell which
         touched.  True (default): choose within that group (see ``rigid_choice``); False: keep
         the innermost link ``n``.
@@ -83,28 +73,32 @@ class DetectionParams:
         whole run's swept map (see :func:`_choose_rigid`); ``"outer"``: the outermost link
         (the map-free prior; also used when no robot is given).
     rigid_dilation : float
-        Dilation [m] used by the ``"map"`` choice (the map is cached, so classifying at the same
-        B reuses it).
+        Dilation [m] used by the ``"map"`` choice.
+    gravity : bool or None
+        Whether the free-motion model has gravity terms (needs ``robot``); None: when a robot
+        is given (they cost nothing where the log's torques hold no gravity: their weights
+        come out zero).
     velocity_threshold, torque_threshold : float or (n,) float, optional
         Absolute overrides of the noise-derived thresholds.
     """
 
     k_velocity: float = 5.0
     k_torque: float = 6.0
-    min_stop_time: float = 0.03
+    min_stop_time: float = 0.05
     min_stop_samples: int = 2
+    release_time: float = 0.1
     smooth_time: float = 0.01
     before_time: float = 0.02
-    motion_torque_fraction: float = 0.2
     rigid_outer: bool = True
     rigid_choice: str = "map"
     rigid_dilation: float = 0.02
+    gravity: bool | None = None
     velocity_threshold: Any = None
     torque_threshold: Any = None
 
     def __post_init__(self) -> None:
-        for name in ("k_velocity", "k_torque", "min_stop_time", "smooth_time", "before_time",
-                     "motion_torque_fraction"):
+        for name in ("k_velocity", "k_torque", "min_stop_time", "release_time", "smooth_time",
+                     "before_time"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be a finite non-negative number, got {value!r}")
@@ -221,107 +215,6 @@ class Contacts:
                         link_prior=self.link_prior[sel])
 
 
-# --------------------------------------------------------------------------- noise estimation
-def _clipped_scale(x: FloatArray, start: FloatArray, iters: int = 8, k: float = 4.0,
-                   mask: NDArray[np.bool_] | None = None) -> FloatArray:
-    """Zero-centred sigma-clipped robust scale of each column of ``x`` (N, n).
-
-    Iterates ``s <- 1.4826 * median(|x|  where |x| < k s)`` from ``start``; the rest cluster of a
-    signal is what survives, motion and contact torques are clipped away.
-    """
-    a = np.abs(x)
-    if mask is not None:
-        a = a[mask]
-    s = np.array(start, dtype=float)
-    if a.shape[0] == 0:
-        return s
-    for _ in range(iters):
-        new = s.copy()
-        for j in range(a.shape[1]):
-            inside = a[:, j][a[:, j] < k * s[j]]
-            if inside.shape[0] >= max(5, 0.02 * a.shape[0]):
-                new[j] = max(_MAD * float(np.median(inside)), 1e-12)
-        if np.allclose(new, s, rtol=1e-3):
-            break
-        s = new
-    return s
-
-
-def _white_scale(x: FloatArray) -> FloatArray:
-    """Per-column white-noise scale from first differences: 1.4826 MAD(diff x) / sqrt 2."""
-    if x.shape[0] < 3:
-        return np.full(x.shape[1], 1e-12)
-    d = np.diff(x, axis=0)
-    return np.maximum(_MAD * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2),
-                      1e-12)
-
-
-def _second_diff_scale(x: FloatArray, mask: NDArray[np.bool_]) -> FloatArray:
-    """White-noise scale of each column from second differences: 1.4826 MAD(d2 x) / sqrt 6.
-
-    Only differences whose three samples all lie in ``mask`` are used (all of them if fewer than
-    10 do).  Linear ramps and plateaus have zero second difference, so they do not inflate it.
-    """
-    if x.shape[0] < 4:
-        return np.full(x.shape[1], 1e-12)
-    d2 = x[2:] - 2 * x[1:-1] + x[:-2]
-    ok = mask[2:] & mask[1:-1] & mask[:-2]
-    if np.count_nonzero(ok) >= 10:
-        d2 = d2[ok]
-    return np.maximum(_MAD * np.median(np.abs(d2), axis=0) / np.sqrt(6), 1e-12)
-
-
-def _smooth(x: FloatArray, width: int) -> FloatArray:
-    """Centred moving average over ``width`` samples (edges use a shrinking window)."""
-    if width <= 1:
-        return x
-    c = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x]), axis=0)
-    n = x.shape[0]
-    half = width // 2
-    lo = np.clip(np.arange(n) - half, 0, n)
-    hi = np.clip(np.arange(n) - half + width, 0, n)
-    return (c[hi] - c[lo]) / (hi - lo)[:, None]
-
-
-def estimate_noise(log: JointLog, params: DetectionParams | None = None
-                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Velocity noise, torque noise and the smoothed velocity of a log.
-
-    Returns
-    -------
-    sigma_v : (n,) float, noise of the smoothed velocity [rad/s]
-    sigma_tau : (n,) float, commanded-torque noise at rest [N m]
-    qd_smooth : (N, n) float
-    """
-    params = params or DetectionParams()
-    _check_log(log)
-    dt = 1.0 / log.rate
-    width = max(1, round(params.smooth_time / dt))
-    qd = _smooth(np.asarray(log.qd), width)
-    # floor: one encoder quantum per sample period, spread over the smoothing window
-    dq = np.abs(np.diff(np.asarray(log.q), axis=0))
-    quantum = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
-    floor = np.maximum(0.5 * quantum / dt / width, 1e-9)
-    sigma_v = np.maximum(_clipped_scale(qd, np.maximum(_white_scale(qd), floor)), floor)
-    # torque noise from second differences on the samples where the arm is at rest: a contact
-    # torque ramps linearly (impedance spring against a moving set point) or saturates, so its
-    # second difference vanishes; the level of the contact torques never enters the estimate
-    # (a clipped MAD of the torque itself is dominated by them when a joint spends most of its
-    # rest time blocked)
-    rest = np.all(np.abs(qd) < 4.0 * sigma_v, axis=1)
-    tau = np.asarray(log.tau_cmd)
-    sigma_tau = _second_diff_scale(tau, rest)
-    # floor: half the torque resolution (a quantised encoder makes tau move in steps; with a
-    # perfectly quiet arm the scale above collapses to zero)
-    dtau = np.abs(np.diff(tau, axis=0))
-    big = 1e-6 * np.maximum(np.abs(tau).max(axis=0), 1e-12)
-    tau_floor = np.array([0.5 * np.percentile(c[c > b], 5) if np.any(c > b) else 1e-9
-                          for c, b in zip(dtau.T, big, strict=True)])
-    sigma_tau = np.maximum(sigma_tau, tau_floor)
-    return sigma_v, sigma_tau, qd
-
-
-# --------------------------------------------------------------------------- detection
 def _check_log(log: JointLog) -> None:
     if log.tau_cmd is None:
         raise InputError("the log has no commanded torques (tau_cmd): contact detection needs "
@@ -335,58 +228,6 @@ def _check_log(log: JointLog) -> None:
             raise InputError(f"log field {name} contains {bad} NaN or infinite values")
     if np.any(np.diff(log.t) <= 0):
         raise InputError("log times must be strictly increasing")
-
-
-def _debounce(labels: IntArray, min_len: int) -> IntArray:
-    """Absorb runs shorter than ``min_len`` samples into the preceding run."""
-    out = labels.copy()
-    if out.shape[0] == 0:
-        return out
-    change = np.flatnonzero(np.diff(out)) + 1
-    starts = np.concatenate([[0], change])
-    ends = np.concatenate([change, [out.shape[0]]])
-    prev = int(out[0]) if ends[0] - starts[0] >= min_len else -1
-    for s, e in zip(starts, ends, strict=True):
-        if e - s < min_len:
-            out[s:e] = prev
-        else:
-            prev = int(out[s])
-    return out
-
-
-def contact_link_per_sample(stopped: NDArray[np.bool_], loaded: NDArray[np.bool_]) -> IntArray:
-    """Link in contact at each sample, -1 for none.
-
-    The outermost joint ``n`` of the stopped prefix (joints ``0..n`` all stopped) that is also
-    loaded.  ``stopped, loaded : (N, n) bool`` → ``(N,) int``.
-    """
-    n = stopped.shape[1]
-    prefix = np.cumprod(stopped, axis=1).astype(bool)  # joints 0..j all stopped
-    blocked = prefix & loaded
-    idx = np.where(blocked, np.arange(n), -1)
-    return idx.max(axis=1).astype(np.int64)
-
-
-def _extend_rigid(rows: list[tuple[int, int, int]], stopped: NDArray[np.bool_],
-                  loaded: NDArray[np.bool_], nb: int) -> list[tuple[int, int, int]]:
-    """Move a contact to the outermost link of the rigid group that was moving.
-
-    When joints ``n+1..m`` were at rest and unloaded before and at the stop (a single-joint
-    move of an inner joint), links ``n..m`` moved as one rigid body and the joint signals cannot
-    tell which of them touched.  The outer link sweeps by far the most space per unit of motion
-    (eq. 1: the probability of touching is the swept share), so the contact is assigned to
-    link ``m``; the tip probability then decides between its tip and its body.
-    """
-    n = stopped.shape[1]
-    out = []
-    for s, e, link in rows:
-        lo = max(0, s - nb)
-        m = link
-        while (m + 1 < n and np.all(stopped[lo:s + 1, m + 1])
-               and not np.any(loaded[lo:s + 1, m + 1])):
-            m += 1
-        out.append((s, e, m))
-    return out
 
 
 def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
@@ -633,216 +474,144 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
     return out, se
 
 
-def _raise_to_loaded_held(rows: list[tuple[int, int, int]], inner: dict[int, int],
-                          held: NDArray[np.bool_], load: FloatArray, se: FloatArray,
-                          stopped: NDArray[np.bool_], loaded: NDArray[np.bool_],
-                          sigma_tau: FloatArray, k: float, nb: int, rigid_outer: bool,
-                          ) -> list[tuple[int, int, int]]:
-    """A held joint beyond the contact link that carries a load moves the contact outward.
-
-    A held joint (at rest and unloaded before the stop, not driven by the move) feels the
-    contact force only through a contact on its own link or beyond: joints beyond the link in
-    contact carry nothing.  Its load can stay under the *motion* threshold of ``loaded`` (a
-    fraction of the joint's torque while it moves) — a tip pushed nearly along the last link
-    loads the wrist by a small moment — yet stand clear of the noise.  When held joint ``m``
-    beyond the innermost link of a contact's group carries a load of more than ``k`` standard
-    errors (and more than one noise sigma), and joints ``0..m`` are stopped, the contact is on
-    link ``m`` or beyond: the group becomes ``m..hi`` (extended past ``m`` over joints at rest
-    and unloaded, as in :func:`_extend_rigid`).  ``inner`` is updated in place.
-    """
-    n = held.shape[1]
-    out = []
-    for i, (s, e, link) in enumerate(rows):
-        lo = inner.get(s, link)
-        sig = held[i] & (np.abs(load[i]) > k * se[i]) & (np.abs(load[i]) > sigma_tau)
-        cand = [j for j in np.flatnonzero(sig) if j > lo and np.all(stopped[s, :j + 1])]
-        if not cand:
-            out.append((s, e, link))
-            continue
-        m = int(max(cand))
-        hi = max(link, m) if rigid_outer else m
-        if rigid_outer and m > link:
-            b0 = max(0, s - nb)
-            while (hi + 1 < n and np.all(stopped[b0:s + 1, hi + 1])
-                   and not np.any(loaded[b0:s + 1, hi + 1]) and not sig[hi + 1]):
-                hi += 1
-        inner[s] = m
-        out.append((s, e, hi))
-    return out
-
-
-def _split_two_stage(rows: list[tuple[int, int, int]], labels: IntArray,
-                     blocked: NDArray[np.bool_], stopped: NDArray[np.bool_], gap: int,
-                     qd_s: FloatArray, v_th: FloatArray, window: int,
-                     ) -> list[tuple[int, int, int]]:
-    """Recover the inner contact of a quick two-stage event.
-
-    When link ``j`` touches and an outer link ``n`` stops on its own obstacle less than the
-    minimum duration later, the debounced label jumps straight to ``n``.  Joint ``j`` then
-    shows a stop that began distinctly earlier (``gap`` samples, more than the smoothing can
-    shift a stop) than joint ``n``'s, after clear motion (3 velocity thresholds), and lasted up
-    to the rise, where it is blocked (loaded):
-    that earlier stop is a contact on link ``j`` (the outermost such joint).  The earlier stop
-    must lie within ``window`` samples (the minimum duration plus the gap) of joint ``n``'s:
-    a joint that stopped long before — it reached its target and was then held, loaded by the
-    outer contact's force — was not blocked by a contact of its own (the debounced label would
-    have risen to it).
-    """
-    out: list[tuple[int, int, int]] = []
-    prev_label = -1
-    # joints 0..j all stopped: the prefix stop starts when the last of them stopped (their
-    # smoothed velocities cross the threshold a sample or two apart)
-    prefix = np.cumprod(stopped, axis=1).astype(bool)
-    for s, e, link in rows:
-        prev_label = int(labels[s - 1]) if s > 0 else -1
-
-        def onset(j: int, arr: NDArray[np.bool_], s: int = s) -> int:
-            k = s
-            while k > 0 and arr[k - 1, j]:
-                k -= 1
-            return k
-
-        on_n = onset(link, stopped)
-        extra = None
-        for j in range(link - 1, prev_label, -1):
-            if not blocked[s, j]:
-                continue
-            on_j = onset(j, prefix)
-            # ... and it was a real stop: the joint was moving clearly (not creeping) before it
-            own = onset(j, stopped)
-            approach = np.abs(qd_s[max(0, own - 2 * gap):own + 1, j])
-            if (on_n - window <= on_j <= on_n - gap
-                    and approach.size and approach.max() > 3 * v_th[j]):
-                extra = (on_j, s, j)
-                break
-        if extra is not None and (not out or extra[0] > out[-1][0]):
-            out.append(extra)
-        out.append((s, e, link))
-    return out
+def _rigid_group(link: int, travel: FloatArray, resolution: FloatArray,
+                 obstructed: tuple[int, ...]) -> int:
+    """Outermost link of the rigid group of ``link``: joints beyond it that were not obstructed
+    and whose travel over the event moved the arm beyond them by less than ``resolution``
+    (per joint) moved as one body with it.  The contact force may be on any of their links with
+    no moment about them (a force along a joint's axis, or through it), so the joint signals
+    cannot tell those links apart; a joint beyond that moved, moved freely, so the contact is
+    inward of it."""
+    n = len(travel)
+    m = link
+    while m + 1 < n and m + 1 not in obstructed and travel[m + 1] < resolution[m + 1]:
+        m += 1
+    return m
 
 
 def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                     params: DetectionParams | None = None) -> Contacts:
-    """Detect contacts and identify the link in contact from ``qd`` and ``tau_cmd`` only.
+    """Detect contact events and identify the link in contact from ``qd`` and ``tau_cmd`` only.
 
     Parameters
     ----------
     log : JointLog with ``tau_cmd`` (N, n)
-    robot : RobotModel, optional; when given its joint names must match the log's
+    robot : RobotModel, optional; when given its joint names must match the log's (it adds
+        gravity to the free-motion model and the map-based choice within rigid groups)
     params : DetectionParams, optional
 
     Returns
     -------
     Contacts
-        One row per contact event, in time order.  A two-stage contact (link ``n`` stops, then an
-        outer link ``m`` stops on its own obstacle while ``0..n`` stay blocked) gives two rows.
+        One row per contact event, in time order (see :mod:`wholearm_tools.contacts.events`):
+        ``t`` its first obstruction, ``t_end`` its release, ``q`` the configuration where it
+        settled, ``qd_before`` the motion that led into it.
 
     Raises
     ------
     InputError
         No commanded torques, NaNs, too few samples, or joint names that do not match ``robot``.
     """
+    from wholearm_tools.contacts import events as ev
+
     params = params or DetectionParams()
     _check_log(log)
     if robot is not None and tuple(robot.joint_names) != tuple(log.joint_names):
         raise InputError(f"log joints {log.joint_names} do not match robot joints "
                          f"{robot.joint_names}")
     n = len(log.joint_names)
-    sigma_v, sigma_tau, qd_s = estimate_noise(log, params)
+    dt = float(np.median(np.diff(log.t)))
+    width = max(1, round(params.smooth_time / dt))
+    q = np.asarray(log.q)
+    qd = np.asarray(log.qd)
+    tau = np.asarray(log.tau_cmd)
+    qd_s = ev.smooth(qd, width)
+    sigma_v = ev.velocity_noise(q, qd, dt, width)
     v_th = (np.broadcast_to(np.asarray(params.velocity_threshold, float), (n,)).copy()
             if params.velocity_threshold is not None else params.k_velocity * sigma_v)
-    tau = np.asarray(log.tau_cmd)
+    stopped = np.abs(qd_s) < v_th
+    qdd = ev.smooth(np.gradient(qd_s, dt, axis=0), max(width, 3))
+    use_gravity = robot is not None if params.gravity is None else bool(params.gravity)
+    if use_gravity and robot is None:
+        raise InputError("a free-motion model with gravity needs the robot")
+    grav = ev.gravity_features(robot, q) if use_gravity and robot is not None else None
+    fm = ev.free_motion(tau, qd_s, qdd, ~stopped, grav)
+    resid = tau - fm.predicted
     if params.torque_threshold is not None:
         tau_th = np.broadcast_to(np.asarray(params.torque_threshold, float), (n,)).copy()
     else:
-        moving = np.abs(qd_s) > v_th
-        tau_motion = np.array([float(np.median(np.abs(tau[moving[:, j], j])))
-                               if np.count_nonzero(moving[:, j]) >= 10 else 0.0
-                               for j in range(n)])
-        tau_th = np.maximum(params.k_torque * sigma_tau,
-                            params.motion_torque_fraction * tau_motion)
-    stopped = np.abs(qd_s) < v_th
-    loaded = np.abs(tau) > tau_th
-    dt = 1.0 / log.rate
+        tau_th = fm.coulomb + params.k_torque * fm.rest_scale
+    loaded = np.abs(resid) > tau_th
     min_len = max(params.min_stop_samples, int(np.ceil(params.min_stop_time / dt - 1e-9)))
-    labels = _debounce(contact_link_per_sample(stopped, loaded), min_len)
-
-    change = np.flatnonzero(np.diff(labels)) + 1
-    starts = np.concatenate([[0], change])
-    ends = np.concatenate([change, [labels.shape[0]]])
-    prev = -1
-    rows: list[tuple[int, int, int]] = []
-    nb = max(2, round(params.before_time / dt))
-    for s, e in zip(starts, ends, strict=True):
-        cur = int(labels[s])
-        if cur > prev and cur >= 0 and s > 0:
-            s0 = rows[-1][0] if rows else 0
-            if (prev >= 0 and rows and rows[-1][2] == prev
-                    and np.all(stopped[max(0, s0 - nb):s + 1, prev + 1:cur + 1])):
-                # joints prev+1..cur were held still all along: no new stop, the same
-                # contact's force building up until their load crossed the threshold
-                rows[-1] = (s0, int(e), cur)
-            else:
-                rows.append((int(s), int(e), cur))
-        prev = cur
-    inner: dict[int, int] = {}  # start sample -> innermost link of its rigid group
-    if params.rigid_outer:
-        ext = _extend_rigid(rows, stopped, loaded, nb)
-        inner = {r[0]: r[2] for r in rows}
-        rows = ext
-    gap = max(2, round(params.smooth_time / dt)) + 1
-    rows = _split_two_stage(rows, labels, stopped & loaded, stopped, gap, qd_s, v_th,
-                            min_len + gap)
-    meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": sigma_tau.tolist(),
-            "min_stop_samples": min_len, "rate": log.rate}
-    if not rows:
+    release = max(1, round(params.release_time / dt))
+    obstructed = np.stack([ev.drop_short(stopped[:, j] & loaded[:, j], min_len)
+                           for j in range(n)], axis=1)
+    free_moving = ~stopped & (np.abs(resid) <= params.k_torque * fm.scale)
+    dragging = np.stack([ev.drop_short(~stopped[:, j] & (resid[:, j] * np.sign(qd_s[:, j])
+                                                         > params.k_torque * fm.scale[j]),
+                                       min_len) for j in range(n)], axis=1)
+    events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
+    meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": fm.rest_scale.tolist(),
+            "sigma_torque_motion": fm.scale.tolist(),
+            "coulomb": fm.coulomb.tolist(), "min_stop_samples": min_len,
+            "release_samples": release, "rate": 1.0 / dt, "gravity_model": grav is not None}
+    if not events:
         return Contacts(np.zeros(0), np.zeros(0, int), np.zeros(0, int), np.zeros((0, n)),
                         np.zeros((0, n)), np.zeros(0), v_th, tau_th, meta)
 
-    q = np.asarray(log.q)
-    qd = np.asarray(log.qd)
-    lag = max(1, round(params.smooth_time / dt) // 2)
+    nb = max(2, round(params.before_time / dt))
+    lag = max(1, width // 2)
     limit = _clip_levels(tau, robot)
     saturated = np.abs(tau) >= limit * (1 - 1e-9)
-    M = len(rows)
+    M = len(events)
+    out_q = np.empty((M, n))
     out_qd = np.zeros((M, n))
-    t_end = np.empty(M)
     peak = np.zeros((M, n))
-    load_se = np.full((M, n), np.inf)
     held = np.zeros((M, n), dtype=bool)
-    for i, (s, e, link) in enumerate(rows):
-        # the segment may end when an outer link stops too; the blocked state lasts until the
-        # label drops below this link
-        k = e
-        while k < labels.shape[0] and labels[k] >= link:
-            k += 1
-        t_end[i] = log.t[min(k, labels.shape[0] - 1)]
-        lo, hi = max(0, s - lag - nb), max(1, s - lag)
+    links = np.empty(M, dtype=np.int64)
+    groups: list[tuple[int, int, int]] = []   # (row, innermost link, outermost link)
+    for i, e in enumerate(events):
+        s_, k_ = e.start, e.settle
+        settled = q[k_:min(k_ + min_len, e.end)]
+        out_q[i] = np.median(settled, axis=0)
+        lo, hi = max(0, s_ - lag - nb), max(1, s_ - lag)
         out_qd[i] = qd[lo:hi].mean(axis=0)
-        at_rest = np.all(stopped[lo:hi], axis=0)  # already stopped before this contact
+        at_rest = np.all(stopped[lo:hi], axis=0)  # already at rest before this contact
         out_qd[i, at_rest] = 0.0
-        # held: at rest and unloaded over the window before that (the contact's own load can
-        # show on a held joint a few samples before the smoothed velocities call the stop)
         h0, h1 = max(0, lo - nb), max(1, lo)
-        held[i] = (at_rest & np.all(stopped[h0:h1], axis=0)
-                   & ~np.any(loaded[h0:h1], axis=0))
-        peak[i], load_se[i] = _stop_torques(tau, stopped, saturated, s, max(e, s + 1),
-                                            out_qd[i] != 0, held[i], h1, 5 * nb, sigma_tau)
-    rows = _raise_to_loaded_held(rows, inner, held, peak, load_se, stopped, loaded, sigma_tau,
-                                 params.k_torque, nb, params.rigid_outer)
-    idx = np.array([r[0] for r in rows])
-    out_q = q[idx].copy()
-    for i, (s, e, link) in enumerate(rows):
-        settle = q[s:min(s + min_len, e)]
-        out_q[i, :link + 1] = np.median(settle[:, :link + 1], axis=0)
-    links = np.array([r[2] for r in rows])
+        held[i] = (at_rest & np.all(stopped[h0:h1], axis=0) & ~np.any(loaded[h0:h1], axis=0))
+        peak[i], _ = _stop_torques(resid, stopped, saturated, k_, max(e.end, k_ + 1),
+                                   out_qd[i] != 0, held[i], h1, 5 * nb, fm.scale)
+        links[i] = e.link
+        if params.rigid_outer:
+            # a joint's travel over the event and the motion that led into it (one release
+            # time before), as rotation: it counts as at rest while the arm beyond it moved by
+            # less than the contact-location resolution (the dilation), or, without a robot,
+            # by less than its velocity noise over that time
+            w0 = max(0, s_ - release)
+            travel = np.sum(np.abs(qd_s[w0:e.end]), axis=0) * dt
+            if robot is not None:
+                arm = np.linalg.norm(robot.joint_positions(out_q[i])[-1]
+                                     - robot.joint_positions(out_q[i])[:-1], axis=1)
+                resolution = params.rigid_dilation / np.maximum(arm, 1e-9)
+            else:
+                resolution = v_th * (e.end - w0) * dt
+            m = _rigid_group(e.link, travel, resolution, e.obstructed)
+            if m > e.link:
+                groups.append((i, e.link, m))
     prior = np.eye(n)[links]
-    if params.rigid_outer and params.rigid_choice == "map" and robot is not None:
-        which = [i for i, r in enumerate(rows) if inner.get(r[0], r[2]) < r[2]]
-        if which:
-            groups = [(inner[rows[i][0]], rows[i][2]) for i in which]
-            links[which], prior[which] = _choose_rigid(
-                robot, q, out_q[which], out_qd[which], peak[which], held[which], tau_th,
-                groups, params.rigid_dilation)
-    return Contacts(log.t[idx], links, idx, out_q, out_qd, t_end, v_th, tau_th, meta,
+    if groups:
+        rows = [g[0] for g in groups]
+        if params.rigid_choice == "map" and robot is not None:
+            chosen, share = _choose_rigid(robot, q, out_q[rows], out_qd[rows], peak[rows],
+                                          held[rows], tau_th, [(g[1], g[2]) for g in groups],
+                                          params.rigid_dilation)
+            links[rows] = chosen
+            prior[rows] = share
+        else:
+            links[rows] = [g[2] for g in groups]
+            prior[rows] = np.eye(n)[links[rows]]
+    idx = np.array([e.settle for e in events])
+    return Contacts(log.t[[e.start for e in events]], links, idx, out_q, out_qd,
+                    log.t[[min(e.end, log.n_samples - 1) for e in events]], v_th, tau_th, meta,
                     tau_peak=peak, held=held, link_prior=prior)

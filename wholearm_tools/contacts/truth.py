@@ -39,3 +39,40 @@ def match_truth(contacts: Contacts, truth: GroundTruth, max_lag: float = 0.1,
             out[k] = j
             used[j] = True
     return out
+
+
+def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
+                 min_duration: float = 0.05) -> NDArray[np.int64]:
+    """Index of the ground-truth contact event each detected contact corresponds to, -1 if none.
+
+    A detection spans ``[t, t_end]`` (first obstruction to release) and a true event
+    ``[contact_t, contact_t_end]`` (``min_duration`` long where its end is unknown); they may
+    pair when the intervals overlap, or come within ``tol`` seconds of each other (the velocity
+    filter delays a detection's start a little).  Pairs are taken by decreasing overlap, one to
+    one, so a detection that spans two true events (two links obstructed one after the other)
+    matches only one of them, and a second detection within one true event (a contact split in
+    two) matches nothing.
+
+    Returns ``(M,) int``.
+    """
+    m = len(contacts)
+    out = np.full(m, -1, dtype=np.int64)
+    if m == 0 or truth.n_contacts == 0:
+        return out
+    ts = np.asarray(truth.contact_t, dtype=float)
+    te = np.asarray(truth.contact_t_end, dtype=float)
+    te = np.where(np.isfinite(te), np.maximum(te, ts), ts + min_duration)
+    ds = np.asarray(contacts.t, dtype=float)
+    de = np.maximum(np.asarray(contacts.t_end, dtype=float), ds)
+    overlap = (np.minimum(de[:, None], te[None, :]) - np.maximum(ds[:, None], ts[None, :])
+               + tol)
+    # ties (several true events a detection overlaps equally) go to the nearest start
+    key = overlap - 1e-6 * np.abs(ds[:, None] - ts[None, :])
+    pairs = np.argwhere(overlap > 0)
+    order = np.argsort(-key[pairs[:, 0], pairs[:, 1]], kind="stable")
+    used = np.zeros(truth.n_contacts, dtype=bool)
+    for i, j in pairs[order]:
+        if out[i] < 0 and not used[j]:
+            out[i] = j
+            used[j] = True
+    return out

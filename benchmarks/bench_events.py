@@ -1,0 +1,169 @@
+"""Contact events: detection, link identification and tip/link labels against ground truth.
+
+For every scenario × seed, a run is simulated with the chosen engine (``--engine physics``:
+MuJoCo with friction, soft contacts, joint friction; ``kinematic``: the idealised engine), its
+contacts detected from the joint signals alone and classified by eq. (2), and the detections
+paired with the true contact events (:func:`wholearm_tools.contacts.match_events`: intervals
+first obstruction → release).  Per run:
+
+* ``events`` true contact events; ``stop`` those that stopped the arm (blocked a commanded
+  motion); ``det`` detections;
+* ``recall``: stopping events paired with a detection / ``stop``;
+* ``prec``: detections paired with a true event (stopping or not) / ``det``;
+* ``link``: paired detections whose link is the true event's link; ``group``: whose true link
+  is among the candidates the joint signals leave (a rigid group; the fitted map decides);
+* ``lab``: tip/link labels right (tip or joint sphere = tip, side = link) among the paired
+  detections on the right link that eq. (2) decided; ``amb``: share left ambiguous.
+
+The last rows give each column's total over the runs and its spread (min-max over seeds).
+Physics parameters can be swept (``--friction``, ``--joint-friction`` as a fraction of the
+effort limit, ``--gravity``) to check that the figures hold beyond the defaults.
+
+Run:  .venv/bin/python benchmarks/bench_events.py --engine physics --seeds 0-9
+      [--scenarios paper_spatial,well_junction] [--friction 1.0] [--joint-friction 0.05]
+      [--gravity] [--duration 60] [--cache DIR] [--list]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from wholearm_tools.classify import tip_probability
+from wholearm_tools.contacts import detect_contacts, match_events
+from wholearm_tools.logs import read_run, write_run
+from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
+
+
+def seeds_arg(text: str) -> list[int]:
+    if "-" in text:
+        a, b = (int(x) for x in text.split("-"))
+        return list(range(a, b + 1))
+    return [int(x) for x in text.split(",")]
+
+
+def get_run(name: str, seed: int, args: argparse.Namespace):
+    """The run, simulated (or read back from ``--cache``, keyed by every parameter)."""
+    sc = load_scenario(name)
+    physics = None
+    tag = f"{name}_{seed}_{args.engine}_{args.duration or 'd'}"
+    if args.engine == "physics":
+        physics = sc.physics
+        changes = {}
+        if args.friction is not None:
+            changes["friction"] = args.friction
+        if args.joint_friction is not None:
+            changes["joint_friction"] = args.joint_friction
+        if args.gravity:
+            changes["gravity"] = True
+        physics = dataclasses.replace(physics, **changes)
+        tag += "_" + "_".join(f"{k}{v}" for k, v in sorted(changes.items()))
+    path = Path(args.cache) / f"{tag}.mcap" if args.cache else None
+    if path is not None and path.exists():
+        return read_run(path)
+    kw = {"physics": physics} if physics is not None else {}
+    run = sc.simulate(seed=seed, duration=args.duration, engine=args.engine, **kw).run
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_run(path, run)
+    return run
+
+
+def score(run, B: float) -> dict:
+    contacts = detect_contacts(run.log, run.robot)
+    cls = tip_probability(run, contacts, B)
+    truth = run.truth
+    mi = match_events(contacts, truth)
+    ok = mi >= 0
+    stopped = np.asarray(truth.contact_stopped, dtype=bool)
+    hit = np.zeros(truth.n_contacts, dtype=bool)
+    hit[mi[ok]] = True
+    true_link = np.where(ok, truth.contact_link[np.maximum(mi, 0)], -1)
+    link_ok = ok & (np.asarray(contacts.link) == true_link)
+    prior = np.asarray(contacts.link_prior)
+    in_group = ok & (prior[np.arange(len(contacts)), np.maximum(true_link, 0)] > 0)
+    true_tip = truth.is_tip[np.maximum(mi, 0)]
+    lab = np.asarray(cls.label)
+    decided = link_ok & (lab != "ambiguous")
+    right = decided & ((lab == "tip") == true_tip)
+    return {"events": truth.n_contacts, "stop": int(stopped.sum()), "det": len(contacts),
+            "found": int((hit & stopped).sum()), "paired": int(ok.sum()),
+            "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()), "decided": int(decided.sum()),
+            "right": int(right.sum()), "amb": int((link_ok & (lab == "ambiguous")).sum()),
+            "missed": [(round(float(truth.contact_t[j]), 3), int(truth.contact_link[j]),
+                        str(truth.contact_kind[j])) for j in np.flatnonzero(stopped & ~hit)],
+            "false": [(round(float(contacts.t[i]), 3), int(contacts.link[i]))
+                      for i in np.flatnonzero(~ok)],
+            "wrong_link": [(round(float(contacts.t[i]), 3), int(contacts.link[i]),
+                            int(truth.contact_link[mi[i]]), str(truth.contact_kind[mi[i]]))
+                           for i in np.flatnonzero(ok & ~link_ok)]}
+
+
+def rate(a: int, b: int) -> float:
+    return a / b if b else float("nan")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--engine", default="physics", choices=["physics", "kinematic"])
+    ap.add_argument("--seeds", default="0-2", type=seeds_arg)
+    ap.add_argument("--scenarios", default=",".join(list_scenarios()))
+    ap.add_argument("--duration", type=float, default=None)
+    ap.add_argument("--friction", type=float, default=None)
+    ap.add_argument("--joint-friction", type=float, default=None)
+    ap.add_argument("--gravity", action="store_true")
+    ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
+    ap.add_argument("--list", action="store_true", help="list missed, false and wrong-link")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    rows = []
+    for name in args.scenarios.split(","):
+        B = float(load_scenario(name).hints.get("B", 0.02))
+        for seed in args.seeds:
+            run = get_run(name, seed, args)
+            t0 = time.perf_counter()
+            s = score(run, B)
+            s.update(scenario=name, seed=seed, time=time.perf_counter() - t0)
+            rows.append(s)
+            print(f"# {name} seed {seed}: {s['events']} events ({s['stop']} stopped), "
+                  f"{s['det']} detections, {s['time']:.1f} s", flush=True)
+            if args.list:
+                print(f"    missed {s['missed']}\n    false {s['false']}\n"
+                      f"    wrong link {s['wrong_link']}")
+    hdr = (f"{'scenario':<14}{'seed':>5}{'events':>7}{'stop':>5}{'det':>5}{'recall':>8}"
+           f"{'prec':>7}{'link':>7}{'group':>7}{'lab':>7}{'amb':>7}")
+    print("\n" + hdr)
+
+    def line(label: str, seed: str, rs: list[dict]) -> str:
+        tot = {k: sum(r[k] for r in rs) for k in ("events", "stop", "det", "found", "paired",
+                                                 "link_ok", "in_group", "decided", "right",
+                                                 "amb")}
+        return (f"{label:<14}{seed:>5}{tot['events']:>7}{tot['stop']:>5}{tot['det']:>5}"
+                f"{rate(tot['found'], tot['stop']):>8.3f}{rate(tot['paired'], tot['det']):>7.3f}"
+                f"{rate(tot['link_ok'], tot['paired']):>7.3f}"
+                f"{rate(tot['in_group'], tot['paired']):>7.3f}"
+                f"{rate(tot['right'], tot['decided']):>7.3f}"
+                f"{rate(tot['amb'], tot['link_ok']):>7.3f}")
+
+    for r in rows:
+        print(line(r["scenario"], str(r["seed"]), [r]))
+    print("-" * len(hdr))
+    for name in dict.fromkeys(r["scenario"] for r in rows):
+        print(line(name, "all", [r for r in rows if r["scenario"] == name]))
+    print(line("all", "all", rows))
+    cols = {"recall": ("found", "stop"), "prec": ("paired", "det"),
+            "link": ("link_ok", "paired"), "group": ("in_group", "paired"), "lab": ("right", "decided"), "amb": ("amb", "link_ok")}
+    spread = []
+    for c, (a, b) in cols.items():
+        v = [rate(r[a], r[b]) for r in rows if r[b]]
+        spread.append(f"{c} {min(v):.3f}-{max(v):.3f}" if v else f"{c} -")
+    print("spread over runs: " + ", ".join(spread))
+
+
+if __name__ == "__main__":
+    main()
