@@ -110,6 +110,16 @@ class FreeMotion:
     coef: tuple[FloatArray, ...]
 
 
+def _resolution(x: FloatArray) -> float:
+    """Half the resolution of a signal: half the 5th percentile of its non-zero steps (a torque
+    computed from a quantised encoder moves in steps of stiffness times the quantum; at rest
+    its second differences are mostly zero, and a noise estimate from them collapses)."""
+    d = np.abs(np.diff(x))
+    big = 1e-6 * max(float(np.abs(x).max(initial=0.0)), 1e-12)
+    d = d[d > big]
+    return 0.5 * float(np.percentile(d, 5)) if d.size else 1e-9
+
+
 def _trimmed_fit(X: FloatArray, y: FloatArray, rows: BoolArray, keep: float = 0.5,
                  steps: int = 8, clip: float = 4.0) -> tuple[FloatArray, float]:
     """Robust least squares of ``y ~ X`` over ``rows``: concentration steps of least trimmed
@@ -191,8 +201,8 @@ def free_motion(tau: FloatArray, qd: FloatArray, qdd: FloatArray, moving: BoolAr
         coul[j] = abs(float(full[2]))
         scale[j] = s
         at_rest = ~moving[:, j]
-        rest[j] = (second_difference_scale(tau[at_rest, j:j + 1])[0]
-                   if np.count_nonzero(at_rest) > 10 else s)
+        rest[j] = max(second_difference_scale(tau[at_rest, j:j + 1])[0]
+                      if np.count_nonzero(at_rest) > 10 else s, _resolution(tau[:, j]))
     return FreeMotion(pred, coul, scale, rest, tuple(coefs))
 
 
@@ -249,10 +259,18 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
     were held while the others moved freely (inertia the model does not capture) are not
     one."""
     N, n = obstructed.shape
-    busy = obstructed.any(axis=1)
+    active = bridge(obstructed.any(axis=1), release)
     if dragging is not None:
-        busy = busy | dragging.any(axis=1)
-    active = bridge(busy, release)
+        # a slide joins the obstruction it ends in, and two obstructions it connects: the gap
+        # before an obstruction is filled where the arm dragged all the way through it
+        drag = dragging.any(axis=1)
+        s_, e_ = runs(active)
+        for k, a in enumerate(s_):
+            b = a
+            while b > 0 and drag[b - 1]:
+                b -= 1
+            if b < a and (b == 0 or k == 0 or b <= e_[k - 1] + release):
+                active[b:a] = True
     out: list[Event] = []
     starts, ends = runs(active)
     for s, e in zip(starts, ends, strict=True):
