@@ -164,9 +164,16 @@ def test_nan_positions(tmp_path, robot):
     bad = JointLog(log.joint_names, log.t, q, log.qd, t0_ns=log.t0_ns)
     path = tmp_path / "nan.mcap"
     write_run(path, Run(robot=robot, log=bad))
-    with pytest.raises(LogFormatError, match=r"nan\.mcap: topic '/joint_states': 1 NaN or "
-                                             r"missing positions \(first: joint 'joint_2' at "
+    with pytest.raises(LogFormatError, match=r"nan\.mcap: topic '/joint_states': 1 NaN "
+                                             r"positions \(first: joint 'joint_2' at "
                                              r"t = 0\.050000 s\)"):
+        read_run(path)
+    q[5, 1] = np.inf
+    path = tmp_path / "inf.mcap"
+    write_run(path, Run(robot=robot, log=JointLog(log.joint_names, log.t, q, log.qd,
+                                                  t0_ns=log.t0_ns)))
+    with pytest.raises(LogFormatError, match=r"inf\.mcap: topic '/joint_states': 1 infinite "
+                                             r"positions \(first: joint 'joint_2'"):
         read_run(path)
 
 
