@@ -120,11 +120,16 @@ def test_plot_ptip_writes_png(mcap: Path, tmp_path: Path) -> None:
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_missing_b_is_a_usage_error(mcap: Path) -> None:
-    res = run("contacts", str(mcap))
-    assert res.exit_code == 2
-    assert "--B" in res.output
-    assert "Traceback" not in res.output
+def test_b_defaults_to_2_cm_and_is_bounded_by_the_reach(mcap: Path) -> None:
+    default = run("contacts", str(mcap), "--json")
+    assert default.exit_code == 0, default.output
+    typed = run("contacts", str(mcap), "--json", "--B", "0.02")
+    assert json.loads(default.stdout)["contacts"] == json.loads(typed.stdout)["contacts"]
+    assert json.loads(default.stdout)["B"] == 0.02
+    far = run("contacts", str(mcap), "--B", "1e9")
+    assert far.exit_code == 1
+    assert "--B = 1e+09 m is larger than the robot's reach" in far.output
+    assert len(far.output.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
@@ -168,9 +173,9 @@ def test_existing_output_is_refused(mcap: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
-@pytest.mark.parametrize("b_args", [[], ["--B", "-1"], ["--B", "0"]])
-def test_a_missing_or_non_positive_b_is_a_usage_error(command: str, b_args: list[str],
-                                                      mcap: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("b_args", [["--B", "-1"], ["--B", "0"], ["--B", "nan"]])
+def test_a_non_positive_b_is_a_usage_error(command: str, b_args: list[str],
+                                           mcap: Path, tmp_path: Path) -> None:
     res = run(command, str(mcap), *b_args, "-o", str(tmp_path / "out.png"))
     assert res.exit_code == 2
     assert "--B" in res.output
