@@ -60,9 +60,10 @@ def _sigint_blocked() -> Iterator[None]:
 
 def _stop(pool: ProcessPoolExecutor) -> None:
     """Cancel queued work and stop the workers now (running tasks are abandoned)."""
-    pool.shutdown(wait=False, cancel_futures=True)
-    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14
+    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14; its
+    # process table is dropped by shutdown, so it is read first
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
     for proc in processes:
         with contextlib.suppress(Exception):
             proc.terminate()
