@@ -190,9 +190,17 @@ def check_input_file(path: str | os.PathLike[str], what: str, *,
     if not stat.S_ISREG(info.st_mode):
         raise error(f"{path}: not a regular file (a device, FIFO or socket), not a {what}")
     if max_bytes is not None and info.st_size > max_bytes:
-        raise error(f"{path}: {info.st_size / 2**20:.0f} MiB is too large for a {what} "
-                    f"(at most {max_bytes / 2**20:.0f} MiB)")
+        raise error(f"{path}: {_size(info.st_size)} is too large for a {what} (at most "
+                    f"{_size(max_bytes)})")
     return int(info.st_size)
+
+
+def _size(n: int) -> str:
+    """A byte count as people read it (bytes, KiB, MiB or GiB)."""
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} bytes"
 
 
 def read_text_input(path: str | os.PathLike[str], what: str, *,
@@ -208,7 +216,7 @@ def read_text_input(path: str | os.PathLike[str], what: str, *,
     except OSError as exc:
         raise error(f"{path}: cannot read {what} ({exc.strerror})") from None
     if len(data) > max_bytes:  # grew since the check
-        raise error(f"{path}: too large for a {what} (at most {max_bytes / 2**20:.0f} MiB)")
+        raise error(f"{path}: too large for a {what} (at most {_size(max_bytes)})")
     return decode_utf8(data, f"{path}", what, error=error)
 
 
