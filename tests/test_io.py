@@ -104,3 +104,16 @@ def test_json_depth_is_bounded(tmp_path: Path) -> None:
         load_json("[" * 200_000, "x.json", "map")
     with pytest.raises(InputError, match=r"x\.json: malformed map \(Expecting"):
         load_json("[1,", "x.json", "map")
+
+
+def test_writers_see_the_output_s_own_name(tmp_path: Path) -> None:
+    """Writers that record the file name (an OBJ's object name) record the output's name, so
+    the output is the same on every run."""
+    names = []
+    for _ in range(2):
+        with output_policy(overwrite=True), atomic_path(tmp_path / "map.obj", ".obj") as tmp:
+            names.append(tmp.name)
+            tmp.write_text(f"# object name: {tmp.stem}\n")
+    assert names == ["map.obj", "map.obj"]
+    assert (tmp_path / "map.obj").read_text() == "# object name: map\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.obj"]

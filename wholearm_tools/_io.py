@@ -19,6 +19,7 @@ import contextlib
 import contextvars
 import errno
 import os
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -114,15 +115,18 @@ def _commit(tmp: Path, target: Path, replace: bool) -> None:
                 from None
         os.replace(tmp, target)
         return
-    tmp.unlink()
 
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike[str], suffix: str = ".tmp", *,
                 overwrite: bool | None = None) -> Iterator[Path]:
-    """Yield a temporary path ending in ``suffix`` next to ``target``; rename it onto ``target``
-    on success, remove it on failure.  For writers that take a file name (open3d, pyvista,
-    matplotlib), ``suffix`` keeps the extension they dispatch on.
+    """Yield a temporary path next to ``target``; rename it onto ``target`` on success, remove
+    it on failure.
+
+    The temporary file has ``target``'s own name (plus ``suffix`` unless the name already ends
+    with it) inside a hidden temporary folder beside ``target``: writers that take a file name
+    (open3d, pyvista, matplotlib) dispatch on its extension, and those that record the name in
+    the file (an OBJ's object name) record the output's name, not a random one.
 
     ``overwrite`` None follows :func:`output_policy` (replace, outside any policy block).
     OS errors while writing (a full disk, a lost mount) become one :class:`OutputError` naming
@@ -135,21 +139,21 @@ def atomic_path(target: str | os.PathLike[str], suffix: str = ".tmp", *,
         raise OutputError(f"{target}: output folder {folder} does not exist")
     check_output_target(target)
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+        scratch = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=folder))
     except OSError as exc:
         raise OutputError(f"{target}: cannot write output ({exc.strerror})") from None
-    os.close(fd)
-    tmp = Path(name)
+    tmp = scratch / (target.name if target.name.endswith(suffix) else target.name + suffix)
     try:
+        tmp.touch()
         yield tmp
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
+        os.chmod(tmp, 0o666 & ~_umask())  # the usual mode for outputs
         _commit(tmp, target, replace)
     except BaseException as exc:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
         if isinstance(exc, Exception) and _is_write_failure(exc):
             raise _write_error(target, exc) from None
         raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 @contextlib.contextmanager
