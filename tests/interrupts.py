@@ -25,6 +25,13 @@ import psutil
 WHOLEARM = Path(sys.executable).with_name("wholearm")
 
 
+def _as_from_a_terminal() -> None:
+    """In the child: SIGINT as a command started from a terminal has it (a script started in
+    the background ignores it, and children inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _group_alive(pgid: int) -> list[int]:
     alive = []
     for proc in psutil.process_iter(["pid"]):
@@ -59,7 +66,7 @@ def interrupt(run: Path, out: Path, sig: signal.Signals, *, after: float | None 
     start = time.monotonic()
     proc = subprocess.Popen([str(WHOLEARM), "reconstruct", str(run), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_as_from_a_terminal)
     sent = "never (finished first)"
     while proc.poll() is None:
         now = time.monotonic() - start

@@ -440,21 +440,29 @@ def test_bad_input(case: Case, base: Base, tmp_path: Path) -> None:
 # -------------------------------------------------------------------- real processes
 
 
+def _as_from_a_terminal() -> None:
+    """In the child: SIGINT as a command started from a terminal has it (a test runner
+    started in the background may ignore it, and children inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def wholearm(*args: str, limit_bytes: int | None = None, **kwargs) -> subprocess.Popen:
     """``wholearm args`` as a real process in its own process group (a terminal's Ctrl-C
     goes to a whole group), optionally with files limited to ``limit_bytes``."""
     env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONDONTWRITEBYTECODE": "1"}
 
-    def limit() -> None:
-        import resource
+    def prepare() -> None:
+        _as_from_a_terminal()
+        if limit_bytes is not None:
+            import resource
 
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
     return subprocess.Popen([str(WHOLEARM), *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True,
-                            preexec_fn=limit if limit_bytes is not None else None, **kwargs)
+                            start_new_session=True, preexec_fn=prepare, **kwargs)
 
 
 def _finish(proc: subprocess.Popen) -> Outcome:
@@ -513,7 +521,8 @@ def sigint_in_a_pool(base: Base, folder: Path) -> Outcome:
             sys.exit(130)
     """)
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_as_from_a_terminal)
     assert proc.stdout is not None
     proc.stdout.readline()
     os.killpg(proc.pid, signal.SIGINT)
