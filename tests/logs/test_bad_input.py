@@ -353,9 +353,9 @@ def test_a_log_or_urdf_that_is_not_a_regular_file_is_refused_unopened(tmp_path, 
 
 
 def test_other_formats_are_named_but_their_bytes_never_shown(tmp_path):
-    db = tmp_path / "bag.db3"
-    db.write_bytes(b"SQLite format 3\x00" + b"secret" * 10)
-    with pytest.raises(LogFormatError, match=r"bag\.db3: not an MCAP file \(it looks like an "
-                                             r"SQLite database") as info:
-        read_run(db)
+    pdf = tmp_path / "run.mcap"
+    pdf.write_bytes(b"%PDF-1.4\n" + b"secret" * 10)
+    with pytest.raises(LogFormatError, match=r"run\.mcap: not an MCAP file \(it looks like a "
+                                             r"PDF\)") as info:
+        read_run(pdf)
     assert "secret" not in str(info.value)

@@ -41,7 +41,7 @@ from wholearm_tools.errors import InputError, LogFormatError, RobotModelError
 from wholearm_tools.logs.bags import scan_log
 from wholearm_tools.logs.decoders import ArrayColumns, JointStateColumns, ValueList
 from wholearm_tools.logs.records import TORQUE_SOURCES, GroundTruth, JointLog, Run
-from wholearm_tools.logs.scan import LogScan
+from wholearm_tools.logs.scan import LogScan, check_log_path
 from wholearm_tools.logs.schemas import (
     COMMAND_TOPIC,
     DESCRIPTION_TOPIC,
@@ -83,6 +83,7 @@ def _scan(path: Path, joint_topic: str | None, command_topic: str | None) -> Log
             return topic in (DESCRIPTION_TOPIC, TRUTH_TOPIC)
         return schema == GROUND_TRUTH
 
+    check_log_path(path)
     scan = scan_log(path, wanted)
     if scan.truncated:
         _warn(f"{path}: file is truncated ({scan.truncation}); read the {scan.n_messages} "

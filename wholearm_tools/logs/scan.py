@@ -74,6 +74,16 @@ _OTHER_FORMATS = ((b"SQLite format 3\x00", "an SQLite database (a rosbag2 .db3?)
                   (b"{", "JSON text"))
 
 
+def check_log_path(path: str | Path) -> None:
+    """LogFormatError unless ``path`` is a folder (a rosbag2 recording) or a regular file: a
+    device node or a FIFO is refused before anything opens it (opening a FIFO blocks until a
+    writer appears; a device is read forever)."""
+    from wholearm_tools._io import check_input_file
+
+    if not Path(path).is_dir():
+        check_input_file(path, "log", error=LogFormatError)
+
+
 def check_magic(path: Path) -> None:
     """LogFormatError unless ``path`` is a regular file starting with the MCAP magic bytes.
 
