@@ -209,7 +209,7 @@ CASES = [
     Case("traceback", "URDF not UTF-8",
          lambda b, f: ["contacts", str(b.run), "--robot", str(_write(f / "bad.urdf",
                                                                     b"<robot \xff>"))],
-         1, r"bad\.urdf: URDF is not UTF-8 text \(byte 0xff at offset 7\)"),
+         1, r"bad\.urdf: not a text file \(a URDF is UTF-8 XML\)"),
     Case("traceback", "contacts.csv not UTF-8",
          lambda b, f: ["fit", str(_write(f / "bad.csv", b"t,link\n\xfe\xff")), "-o",
                        str(f / "m.json")],
@@ -330,7 +330,7 @@ CASES = [
     # usage
     Case("usage", "missing log",
          lambda b, f: ["reconstruct", str(f / "nope.mcap"), "-o", str(f / "out")],
-         2, r"'RUN': File '\S*nope\.mcap' does not exist"),
+         2, r"'RUN': Path '\S*nope\.mcap' does not exist"),
     Case("usage", "an unknown --kind",
          lambda b, f: ["fit", str(_contacts_csv(f)), "--kind", "blob", "-o", str(f / "m.json")],
          2, r"'--kind': unknown primitive type 'blob' \(known: circle, cone"),
