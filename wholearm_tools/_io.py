@@ -19,7 +19,6 @@ import contextlib
 import contextvars
 import errno
 import os
-import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -153,7 +152,20 @@ def atomic_path(target: str | os.PathLike[str], suffix: str = ".tmp", *,
             raise _write_error(target, exc) from None
         raise
     finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+        _remove_scratch(scratch)
+
+
+def _remove_scratch(folder: Path) -> None:
+    """Remove a scratch folder and what a writer left in it (a writer may add sidecar files);
+    errors are ignored: the output itself is already in place or the error is being raised."""
+    with contextlib.suppress(OSError):
+        for entry in folder.iterdir():
+            with contextlib.suppress(OSError):
+                if entry.is_dir() and not entry.is_symlink():
+                    _remove_scratch(entry)
+                else:
+                    entry.unlink()
+        folder.rmdir()
 
 
 @contextlib.contextmanager
