@@ -63,6 +63,8 @@ def main() -> None:
         assert code == 0, err
         assert wholearm(["contacts", str(run), "-o", str(csv)])[0] == 0
         assert wholearm(["reconstruct", str(run), "-o", str(out)])[0] == 0
+        urdf = d / "robot.urdf"
+        urdf.write_text(_urdf())
         missing = str(d / "missing.mcap")
         # command: (success args builder(k), missing-file args, bad-option args)
         commands = {
@@ -73,6 +75,9 @@ def main() -> None:
                          ["simulate", "lab_circle", "--rate", "0", "-o", str(d / "m.mcap")]),
             "inspect": (lambda k: ["inspect", str(run)], ["inspect", missing],
                         ["inspect", str(run), "--bogus"]),
+            "robot": (lambda k: ["robot", str(urdf), "--log", str(run)],
+                      ["robot", str(d / "missing.urdf")],
+                      ["robot", str(urdf), "--log", str(d / "missing.mcap")]),
             "contacts": (lambda k: ["contacts", str(run)], ["contacts", missing],
                          ["contacts", str(run), "--B", "-1"]),
             "plot-ptip": (lambda k: ["plot-ptip", str(run), "--steps", "20", "-o",
@@ -125,6 +130,13 @@ def main() -> None:
             noisy = "Error" in err or "Traceback" in err
             cells.append(f"{code} ({'error!' if noisy else 'quiet'})")
             print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+
+
+def _urdf() -> str:
+    from wholearm_tools.robot import robot_to_urdf
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    return robot_to_urdf(load_scenario("lab_circle").robot)
 
 
 def _folder(path: Path) -> Path:

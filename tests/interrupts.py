@@ -50,6 +50,11 @@ def _workers_started(proc: subprocess.Popen, out: Path) -> bool:
         return False
 
 
+def _staging(proc: subprocess.Popen, out: Path) -> bool:
+    """The output set is being written (its staging folder beside the output folder)."""
+    return any(out.parent.glob(f".{out.name}.*"))
+
+
 def _exists(name: str) -> Callable[[subprocess.Popen, Path], bool]:
     def check(proc: subprocess.Popen, out: Path) -> bool:
         return (out / name).exists() if name else out.exists()
@@ -79,6 +84,7 @@ def interrupt(run: Path, out: Path, sig: signal.Signals, *, after: float | None 
     time.sleep(1.0)
     left = sorted(str(p.relative_to(out.parent)) for p in [out, *out.rglob("*")]
                   if p.exists()) if out.exists() else []
+    left += sorted(p.name + "/ (beside)" for p in out.parent.glob(f".{out.name}.*"))
     alive = len(_group_alive(proc.pid))
     code: int | str = proc.returncode if proc.returncode >= 0 else \
         f"killed by {signal.Signals(-proc.returncode).name}"
@@ -102,6 +108,8 @@ def main() -> None:
             (signal.SIGKILL, "1 s", {"after": 1.0}),
             (signal.SIGKILL, "during the fit (pool workers running)",
              {"when": _workers_started}),
+            (signal.SIGKILL, "while the set is written (staging folder exists)",
+             {"when": _staging}),
             (signal.SIGKILL, "as soon as the output folder exists", {"when": _exists("")}),
             (signal.SIGKILL, "as soon as map.json exists", {"when": _exists("map.json")}),
             (None, "not interrupted", {}),
@@ -123,6 +131,7 @@ def main() -> None:
                 err = err[:87] + "..."
             shown = ", ".join(p.removeprefix(out.name + "/") for p in left
                               if p != out.name) or ("(empty folder)" if left else "(none)")
+            shown = shown.replace(out.name, "OUT")
             print(f"| {name} | {label} | {sent} | {code} | {err or '(nothing)'} | {shown} "
                   f"| {alive} |")
 
