@@ -4,11 +4,16 @@ every B and tabulate the results side by side (comparison.csv, .json, .pdf)."""
 from __future__ import annotations
 
 import json
+import logging
+import sys
 from pathlib import Path
 
 import click
 
 from cli.options import (
+    DEFAULT_B,
+    InputPath,
+    PositiveLength,
     RigOptions,
     causal_option,
     command_topic_option,
@@ -17,15 +22,21 @@ from cli.options import (
     loss_option,
     overwrite_option,
     prepare_output_dir,
+    progress_enabled,
+    result,
     rig_options,
+    status,
 )
+
+log = logging.getLogger(__name__)
 
 
 @click.command("compare")
-@click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--B", "Bs", type=click.FloatRange(min=0.0, min_open=True), multiple=True,
-              required=True, help="Smallest expected surface curvature radius B [m] "
-              "(repeat for each value to compare).")
+@click.argument("logs", nargs=-1, required=True, type=InputPath())
+@click.option("--B", "Bs", type=PositiveLength(), multiple=True,
+              default=(DEFAULT_B,), show_default=True,
+              help="Smallest expected surface curvature radius B [m] (repeat for each value "
+                   "to compare).")
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (comparison.csv, .json, .pdf).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -51,26 +62,33 @@ def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
     from wholearm_tools.compare import OUTPUT_NAMES, compare_runs, write_comparison
     from wholearm_tools.errors import WholearmError
 
-    for log in logs:
-        if not log.exists():
-            raise click.ClickException(f"{log}: no such log file")
-        if not log.is_file():
-            raise click.ClickException(f"{log}: not a log file")
     prepare_output_dir(out_dir, list(OUTPUT_NAMES), overwrite)
     read_options = {"joint_topic": joint_topic, "command_topic": command_topic,
                     "require_commands": True, **rig.read_kwargs()}
+    pairs = len({p.resolve() for p in logs}) * len(set(Bs))
     try:
-        table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
-                             read_options=read_options, causal=causal, loss=loss)
+        if progress_enabled():
+            with click.progressbar(length=pairs, label=f"reconstructing {pairs} (log, B) pairs",
+                                   file=sys.stderr) as bar:
+                table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
+                                     read_options=read_options, causal=causal, loss=loss,
+                                     progress=lambda done, total: bar.update(1))
+        else:
+            def progress(done: int, total: int) -> None:
+                log.info("%d of %d (log, B) pairs reconstructed", done, total)
+
+            table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
+                                 read_options=read_options, causal=causal, loss=loss,
+                                 progress=progress)
         paths = write_comparison(out_dir, table)
     except WholearmError as exc:  # one line, however the command is mounted
         raise click.ClickException(str(exc)) from None
     if as_json:
-        click.echo(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
-                               **table.to_json()}))
+        result(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
+                           **table.to_json()}))
     else:
-        click.echo(table.to_text())
-        click.echo(f"wrote {paths['csv']}, {paths['json']} and {paths['pdf']}")
+        result(table.to_text())
+        status(f"wrote {paths['csv']}, {paths['json']} and {paths['pdf']}")
     failed = table.failed
     if failed:
         first = failed[0]

@@ -27,6 +27,7 @@ import click
 
 from cli.options import (
     B_option,
+    InputPath,
     RigOptions,
     causal_option,
     check_output_file,
@@ -34,10 +35,27 @@ from cli.options import (
     joint_topic_option,
     json_option,
     overwrite_option,
+    result,
     rig_options,
+    stage,
+    status,
 )
 
 log = logging.getLogger(__name__)
+
+
+def column_types(fields: list[str]) -> dict[str, str]:
+    """Declared type of every column :func:`contact_rows` writes: the contact table's own
+    (:func:`wholearm_tools.contact_table.table_column_types`), then the diagnostics."""
+    from wholearm_tools.contact_table import table_column_types
+
+    dim = 3 if "tip_z" in fields else 2
+    types = table_column_types(dim)
+    types.update({"contact": "int64", "index": "int64", "p_tip_nomap": "float64",
+                  "p_tip_swept": "float64", "consistent": "int64", "t_end": "float64",
+                  "true_link": "int64", "true_kind": "string"})
+    types.update({f: "float64" for f in fields if f.startswith(("q_", "qd_"))})
+    return {f: types[f] for f in fields}
 
 
 def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict[str, Any]]]:
@@ -50,8 +68,10 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
     from wholearm_tools.contacts import detect_contacts, match_truth
     from wholearm_tools.pipeline import contact_table
 
-    contacts = detect_contacts(run.log, run.robot)
-    cls = tip_probability(run, contacts, B, causal=causal)
+    with stage("detecting contacts"):
+        contacts = detect_contacts(run.log, run.robot)
+    with stage(f"classifying {len(contacts)} contacts with B = {B:g} m"):
+        cls = tip_probability(run, contacts, B, causal=causal)
     table = contact_table(run.robot, contacts, cls)
     header, base = table.rows()
     match = match_truth(contacts, run.truth) if run.truth is not None else None
@@ -80,8 +100,8 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
 
 
 @click.command("contacts")
-@click.argument("run", type=click.Path(exists=True, path_type=Path))
-@B_option(default=None)
+@click.argument("run", type=InputPath())
+@B_option()
 @causal_option
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the contacts as CSV, or Parquet for a .parquet name (default: a "
@@ -95,29 +115,36 @@ def command(run: Path, B: float, causal: bool, output: Path | None, rig: RigOpti
             joint_topic: str | None, command_topic: str | None, as_json: bool,
             overwrite: bool) -> None:
     """Detect the contacts of RUN, identify the link, and classify tip vs link body."""
-    from wholearm_tools._tables import write_rows
+    from wholearm_tools._tables import typed_rows, write_rows
+    from wholearm_tools.classify.swept import check_B
     from wholearm_tools.logs import read_run
 
     if output is not None:
         check_output_file(output, overwrite)
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                    require_commands=True, **rig.read_kwargs())
+    with stage(f"reading {run}"):
+        data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                        require_commands=True, **rig.read_kwargs())
+    check_B(B, data.robot, what="--B")
     fields, rows = contact_rows(data, B, causal)
+    types = column_types(fields)
     log.info("%d contacts in %s", len(rows), run)
     if output is not None:
-        write_rows(output, fields, rows, meta={"run": str(run), "B": B, "causal": causal})
+        write_rows(output, fields, rows, types, meta={"run": str(run), "B": B,
+                                                      "causal": causal})
     if as_json:
-        click.echo(json.dumps({"run": str(run), "B": B, "causal": causal, "contacts": rows},
-                              indent=2))
+        result(json.dumps({"run": str(run), "B": B, "causal": causal,
+                           "output": None if output is None else str(output),
+                           "contacts": typed_rows(fields, rows, types)}, indent=2))
     elif output is None:
         head = f"{'#':>3} {'t [s]':>9} {'link':>4} {'P_T':>6} {'label':<9}"
         truth = bool(rows) and "true_link" in rows[0]
-        click.echo(head + ("  true" if truth else ""))
+        lines = [head + ("  true" if truth else "")]
         for r in rows:
             line = (f"{r['contact']:>3} {float(r['t']):>9.3f} {r['link']:>4} "
                     f"{float(r['p_tip']):>6.3f} {r['label']:<9}")
             if truth:
                 line += f"  {r['true_link']} {r['true_kind']}"
-            click.echo(line)
+            lines.append(line)
+        result("\n".join(lines))
     else:
-        click.echo(f"{len(rows)} contacts written to {output}", err=True)
+        status(f"{len(rows)} contacts written to {output}")

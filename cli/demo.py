@@ -9,18 +9,20 @@ folder (default ``reports/demo``) and replaces what it wrote before, as a unit
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 import click
 
+from cli.options import PositiveLength, json_option, result, status
 from cli.reconstruct import summary_lines
 
 RUN_NAME = "run.mcap"
 
 
 def _step(message: str) -> float:
-    click.echo(f"• {message}", err=True)
+    status(f"• {message}")
     return time.perf_counter()
 
 
@@ -30,12 +32,13 @@ def _step(message: str) -> float:
 @click.option("--scenario", default="well_junction", show_default=True,
               help="Bundled scenario to simulate.")
 @click.option("--seed", type=int, default=None, help="Simulation seed (default: the scenario's).")
-@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Arm time to simulate [s] (default: the scenario's).")
-@click.option("--B", "B", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="B [m] (default: the scenario's hint).")
+@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True, max=3600.0),
+              default=None, help="Arm time to simulate [s] (default: the scenario's).")
+@click.option("--B", "B", type=PositiveLength(), default=None,
+              help="B [m] (default: the scenario's B hint, else 0.02).")
+@json_option
 def command(out_dir: Path, scenario: str, seed: int | None, duration: float | None,
-            B: float | None) -> None:
+            B: float | None, as_json: bool) -> None:
     """Run the whole pipeline on a simulated run and write every deliverable."""
     from wholearm_tools.logs import read_run, write_run
     from wholearm_tools.outputs import OutputSet, reconstruction_names, write_outputs
@@ -50,8 +53,8 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
                   "of arm time)")
         sim = sc.simulate(seed=seed, duration=duration)
         write_run(run_path, sim.run)
-        click.echo(f"  {sim.run.log.n_samples} samples, {sim.truth.n_contacts} true contacts "
-                   f"({time.perf_counter() - t:.1f} s)", err=True)
+        status(f"  {sim.run.log.n_samples} samples, {sim.truth.n_contacts} true contacts "
+               f"({time.perf_counter() - t:.1f} s)")
 
         B = float(B if B is not None else sc.hints.get("B", 0.02))
         t = _step(f"reconstructing from {out.final(RUN_NAME)} with B = {B:g} m")
@@ -59,14 +62,19 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
         if not rec.surface_map.primitives:
             raise click.ClickException(f"{out.final(RUN_NAME)}: nothing could be fitted "
                                        f"({'; '.join(rec.messages) or 'no primitive found'})")
-        click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
+        status(f"  ({time.perf_counter() - t:.1f} s)")
         t = _step("writing map.json, contacts.csv, meshes, overlay and the PDF report")
         paths = write_outputs(out, rec, input_path=run_path)
-        click.echo(f"  ({time.perf_counter() - t:.1f} s)", err=True)
+        status(f"  ({time.perf_counter() - t:.1f} s)")
 
+    if as_json:
+        result(json.dumps({"outputs": {"run": str(out.final(RUN_NAME)),
+                                       **{k: str(v) for k, v in paths.items()}},
+                           **rec.surface_map.to_json()}))
+        return
     for line in summary_lines(rec):
-        click.echo(line)
-    click.echo(f"\noutputs in {out_dir}/ (total {time.perf_counter() - start:.0f} s):")
-    click.echo(f"  {'run log':<12} {out.final(RUN_NAME)}")
+        status(line)
+    status(f"\noutputs in {out_dir}/ (total {time.perf_counter() - start:.0f} s):")
+    status(f"  {'run log':<12} {out.final(RUN_NAME)}")
     for key, path in paths.items():
-        click.echo(f"  {key:<12} {path}")
+        status(f"  {key:<12} {path}")

@@ -8,19 +8,28 @@ from pathlib import Path
 
 import click
 
-from cli.options import check_output_file, json_option, overwrite_option
+from cli.options import (
+    InputFile,
+    check_output_file,
+    json_option,
+    overwrite_option,
+    result,
+    stage,
+    status,
+)
 
 MESH_FORMATS = ("ply", "stl", "obj", "gltf", "glb", "vtp")
 DRAWING_FORMATS = ("svg", "png")
 
 
 @click.command("export")
-@click.argument("map_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("map_file", type=InputFile())
 @click.option("-f", "--format", "formats", multiple=True, default=("ply",), show_default=True,
               type=click.Choice(MESH_FORMATS + DRAWING_FORMATS, case_sensitive=False),
               help="Output format (repeatable); svg/png draw planar maps.")
-@click.option("-o", "--output-dir", type=click.Path(file_okay=False, path_type=Path),
-              default=None, help="Output folder [default: the map's folder].")
+@click.option("-o", "--output", "--output-dir", "output_dir",
+              type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Output folder [default: the map's folder].")
 @click.option("--resolution", type=click.FloatRange(min=1e-5), default=0.005,
               show_default=True, help="Largest edge length along curved directions, metres.")
 @click.option("--height", type=click.FloatRange(min=1e-5), default=0.1, show_default=True,
@@ -67,8 +76,9 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
             f"{map_file}: {'/'.join(drawings)} drawings need a planar map (this map is 3-D)")
     parts = []
     if any(fmt in MESH_FORMATS for fmt in formats):
-        parts = map_meshes(surface_map, resolution=resolution, height=height,
-                           include_unexplained=not no_unexplained)
+        with stage("meshing the map"):
+            parts = map_meshes(surface_map, resolution=resolution, height=height,
+                               include_unexplained=not no_unexplained)
         if all(part.mesh.is_empty for part in parts):
             raise click.ClickException(f"{map_file}: the map has nothing to mesh")
     created: list[Path] = []
@@ -88,10 +98,10 @@ def _export(map_file: Path, formats: tuple[str, ...], output_dir: Path | None,
                 out.unlink()
         raise
     if as_json:
-        click.echo(json.dumps({"map": str(map_file), "outputs": {f: str(o) for f, o in outputs},
-                               "surfaces": [part.name for part in parts],
-                               "vertices": sum(part.mesh.n_vertices for part in parts),
-                               "triangles": sum(part.mesh.n_triangles for part in parts)}))
+        result(json.dumps({"map": str(map_file), "outputs": {f: str(o) for f, o in outputs},
+                           "surfaces": [part.name for part in parts],
+                           "vertices": sum(part.mesh.n_vertices for part in parts),
+                           "triangles": sum(part.mesh.n_triangles for part in parts)}))
     else:
         for _, out in outputs:
-            click.echo(str(out))
+            status(f"wrote {out}")

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from cli.options import json_option
+from cli.options import InputPath, json_option, result, stage
 
 
 def _yes(value: object) -> str:
@@ -17,7 +17,7 @@ def _yes(value: object) -> str:
 
 
 @click.command("inspect")
-@click.argument("run", type=click.Path(path_type=Path))
+@click.argument("run", type=InputPath())
 @json_option
 @click.option("--joint-topic", default=None, metavar="TOPIC",
               help="JointState topic to describe (default /joint_states or the only one).")
@@ -25,11 +25,13 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     """Describe the log RUN: topics, joints, duration, rates, URDF, torque sources, truth."""
     from wholearm_tools.logs.inspect import inspect_log
 
-    info = inspect_log(run, joint_topic=joint_topic)
+    with stage(f"reading {run}"):
+        info = inspect_log(run, joint_topic=joint_topic)
     info["torque_sources"] = _torque_sources(info)
-    info["contacts_found"] = _contacts_found(run, info, joint_topic)
+    with stage("detecting contacts"):
+        info["contacts_found"] = _contacts_found(run, info, joint_topic)
     if as_json:
-        click.echo(json.dumps(info, indent=2, sort_keys=True))
+        result(json.dumps(info, indent=2, sort_keys=True))
         return
     container = (f"{info['mcap_profile']}, read with {info['library']}"
                  if info["mcap_profile"].startswith(("rosbag2", "ros1 bag")) else
@@ -80,7 +82,7 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
         out.append(f"metadata:  {', '.join(info['metadata'])}")
     if info["attachments"]:
         out.append(f"attachments: {', '.join(info['attachments'])}")
-    click.echo("\n".join(out))
+    result("\n".join(out))
 
 
 def _torque_sources(info: dict) -> dict:

@@ -8,24 +8,30 @@ the true label when the log has ground truth (orange = tip/joint, blue = body).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
 
 from cli.options import (
     B_option,
+    InputPath,
     RigOptions,
     check_output_file,
     command_topic_option,
     joint_topic_option,
+    json_option,
     overwrite_option,
+    result,
     rig_options,
+    stage,
+    status,
 )
 
 
 @click.command("plot-ptip")
-@click.argument("run", type=click.Path(exists=True, path_type=Path))
-@B_option(default=None)
+@click.argument("run", type=InputPath())
+@B_option()
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Image file (PNG, PDF or SVG by extension).")
 @click.option("--steps", type=click.IntRange(2, 2000), default=200, show_default=True,
@@ -33,24 +39,35 @@ from cli.options import (
 @rig_options
 @joint_topic_option
 @command_topic_option
+@json_option
 @overwrite_option
 def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
-            joint_topic: str | None, command_topic: str | None, overwrite: bool) -> None:
+            joint_topic: str | None, command_topic: str | None, as_json: bool,
+            overwrite: bool) -> None:
     """Plot every contact's tip probability over time (causal replay, Figure 4)."""
     import numpy as np
 
     from wholearm_tools._io import atomic_output
     from wholearm_tools.classify import ClassifyParams, swept_map, tip_probability_history
+    from wholearm_tools.classify.swept import check_B
     from wholearm_tools.contacts import detect_contacts, match_truth
     from wholearm_tools.logs import read_run
 
     check_output_file(output, overwrite)
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                    require_commands=True, **rig.read_kwargs())
-    contacts = detect_contacts(data.log, data.robot)
-    grid = swept_map(data.robot, data.log.q, B=B)
-    times = np.linspace(data.log.t[0], data.log.t[-1], steps)
-    hist = tip_probability_history(data, contacts, B, times, grid=grid)
+    fmt = output.suffix.lstrip(".").lower() or "png"
+    if fmt not in ("png", "pdf", "svg"):
+        raise click.BadParameter(f"expected a .png, .pdf or .svg file name, got {output}",
+                                 param_hint="-o/--output")
+    with stage(f"reading {run}"):
+        data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                        require_commands=True, **rig.read_kwargs())
+    check_B(B, data.robot, what="--B")
+    with stage("detecting contacts"):
+        contacts = detect_contacts(data.log, data.robot)
+    with stage(f"replaying the swept map at {steps} times"):
+        grid = swept_map(data.robot, data.log.q, B=B)
+        times = np.linspace(data.log.t[0], data.log.t[-1], steps)
+        hist = tip_probability_history(data, contacts, B, times, grid=grid)
 
     import matplotlib
 
@@ -82,8 +99,13 @@ def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
         title += "  — orange: true tip/joint, blue: true body"
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fmt = output.suffix.lstrip(".").lower() or "png"
     with atomic_output(output, "wb") as fh:
         fig.savefig(fh, format=fmt, dpi=120)
     plt.close(fig)
-    click.echo(f"wrote {output}", err=True)
+    if as_json:
+        result(json.dumps({"run": str(run), "B": B, "output": str(output), "steps": steps,
+                           "contacts": len(contacts),
+                           "final_p_tip": [None if np.isnan(v) else float(v)
+                                           for v in hist[:, -1]] if len(contacts) else []}))
+    else:
+        status(f"wrote {output}")

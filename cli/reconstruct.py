@@ -11,6 +11,7 @@ import click
 
 from cli.options import (
     B_option,
+    InputPath,
     RigOptions,
     causal_option,
     command_topic_option,
@@ -19,7 +20,10 @@ from cli.options import (
     json_option,
     loss_option,
     overwrite_option,
+    result,
     rig_options,
+    stage,
+    status,
 )
 
 
@@ -75,7 +79,7 @@ def chosen_meshes(mesh_formats: tuple[str, ...], no_meshes: bool) -> tuple[str, 
 
 
 @click.command("reconstruct")
-@click.argument("run", type=click.Path(exists=True, path_type=Path))
+@click.argument("run", type=InputPath())
 @B_option()
 @click.option("-o", "--output", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (map.json, contacts.csv, report_data.json, "
@@ -97,6 +101,7 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: Ri
     every output of the run into the folder (--overwrite replaces a previous set whole)."""
     import logging
 
+    from wholearm_tools.classify.swept import check_B
     from wholearm_tools.logs import read_run
     from wholearm_tools.outputs import OutputSet, reconstruction_names, write_outputs
     from wholearm_tools.pipeline import reconstruct
@@ -104,19 +109,24 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: Ri
     log = logging.getLogger("wholearm.reconstruct")
     meshes = chosen_meshes(mesh_formats, no_meshes)
     with OutputSet(out_dir, reconstruction_names(), overwrite=overwrite) as out:
-        data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                        require_commands=True, **rig.read_kwargs())
-        rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
+        with stage(f"reading {run}"):
+            data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                            require_commands=True, **rig.read_kwargs())
+        check_B(B, data.robot, what="--B")
+        with stage(f"reconstructing with B = {B:g} m (detect, classify, fit)"):
+            rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers)
         if not rec.surface_map.primitives:
             reason = "; ".join(rec.messages) or "no primitive explains the contacts"
             raise click.ClickException(f"{run}: nothing could be fitted ({reason})")
-        paths = write_outputs(out, rec, input_path=run, meshes=meshes, overlay=not no_overlay,
-                              report=not no_report, progress=log.info)
+        with stage("writing the outputs"):
+            paths = write_outputs(out, rec, input_path=run, meshes=meshes,
+                                  overlay=not no_overlay, report=not no_report,
+                                  progress=log.info)
     if as_json:
-        click.echo(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
-                               "map": str(paths["map"]), "contacts": str(paths["contacts"]),
-                               **rec.surface_map.to_json()}))
+        result(json.dumps({"outputs": {k: str(v) for k, v in paths.items()},
+                           "map": str(paths["map"]), "contacts": str(paths["contacts"]),
+                           **rec.surface_map.to_json()}))
         return
     for line in summary_lines(rec):
-        click.echo(line)
-    click.echo(f"wrote {out_dir}/: " + ", ".join(p.name for p in paths.values()))
+        status(line)
+    status(f"wrote {out_dir}/: " + ", ".join(p.name for p in paths.values()))

@@ -10,23 +10,29 @@ With a log (MCAP, or a bag): read → reconstruct with ``--B``/``--loss``/``--ca
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
 
 from cli.options import (
+    DEFAULT_B,
+    InputPath,
+    PositiveLength,
     RigOptions,
     causal_option,
     check_output_file,
     command_topic_option,
     joint_topic_option,
+    json_option,
     loss_option,
     overwrite_option,
+    result,
     rig_options,
+    stage,
+    status,
 )
 
-#: B used for an MCAP log when --B is not given [m]
-DEFAULT_B = 0.02
 #: options that only apply to a log (an output folder records what it was made with)
 _LOG_OPTIONS = (("B", "--B"), ("causal", "--causal"), ("loss", "--loss"),
                 ("robot_file", "--robot"), ("base_link", "--base-link"),
@@ -43,11 +49,11 @@ def _is_output_folder(path: Path) -> bool:
 
 
 @click.command("report")
-@click.argument("run", type=click.Path(exists=True, path_type=Path))
+@click.argument("run", type=InputPath())
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="PDF file to write (default for an output folder: OUT/report.pdf; "
                    "required for a log).")
-@click.option("--B", "B", type=click.FloatRange(min=0.0, min_open=True), default=None,
+@click.option("--B", "B", type=PositiveLength(), default=None,
               help=f"Smallest expected surface curvature radius B [m] for a log (default "
                    f"{DEFAULT_B}); an output folder uses the B it records.")
 @click.option("--title", default=None, help="Title of page one.")
@@ -56,10 +62,11 @@ def _is_output_folder(path: Path) -> bool:
 @rig_options
 @joint_topic_option
 @command_topic_option
+@json_option
 @overwrite_option
 def command(run: Path, output: Path | None, B: float | None, title: str | None, causal: bool,
             loss: str, rig: RigOptions, joint_topic: str | None, command_topic: str | None,
-            overwrite: bool) -> None:
+            as_json: bool, overwrite: bool) -> None:
     """Write the PDF report of RUN: an output folder (or its map.json), rendered again from
     its files, or an MCAP log, reconstructed first."""
     from wholearm_tools.report import write_report
@@ -87,31 +94,41 @@ def command(run: Path, output: Path | None, B: float | None, title: str | None, 
         if _is_output_folder(run):
             from wholearm_tools.report.data import load_report_data
 
-            data = load_report_data(run)
+            with stage(f"reading {run}"):
+                data = load_report_data(run)
         else:
             data = _from_log(run, output, B=DEFAULT_B if B is None else B, causal=causal,
                              loss=loss, rig=rig, joint_topic=joint_topic,
                              command_topic=command_topic)
-        info = write_report(output, data, title=title)
+        with stage(f"writing {output}"):
+            info = write_report(output, data, title=title)
     except WholearmError as exc:  # one line, however the command is mounted
         raise click.ClickException(str(exc)) from None
+    if as_json:
+        result(json.dumps({"input": str(run), "output": str(output),
+                           "pages": int(info.n_pages)}))
+        return
     for line in summary_lines(data, info.accuracy, info.junction):
-        click.echo(line)
-    click.echo(f"wrote {output} ({info.n_pages} pages)", err=True)
+        status(line)
+    status(f"wrote {output} ({info.n_pages} pages)")
 
 
 def _from_log(run: Path, output: Path, *, B: float, causal: bool, loss: str, rig: RigOptions,
               joint_topic: str | None, command_topic: str | None):
     """Reconstruct the log and return its report data, the input recorded relative to the
     PDF's folder."""
+    from wholearm_tools.classify.swept import check_B
     from wholearm_tools.logs import read_run
     from wholearm_tools.outputs import map_with_provenance, reconstruction_parameters
     from wholearm_tools.pipeline import reconstruct
     from wholearm_tools.report.data import report_data_from_reconstruction, run_info
 
-    data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                    require_commands=True, **rig.read_kwargs())
-    rec = reconstruct(data, B=B, causal=causal, loss=loss)
+    with stage(f"reading {run}"):
+        data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
+                        require_commands=True, **rig.read_kwargs())
+    check_B(B, data.robot, what="--B")
+    with stage(f"reconstructing with B = {B:g} m (detect, classify, fit)"):
+        rec = reconstruct(data, B=B, causal=causal, loss=loss)
     folder = output.parent if str(output.parent) else Path(".")
     sm = map_with_provenance(rec.surface_map, folder, run, "log", reconstruction_parameters(rec))
     record = sm.meta["input"]

@@ -17,11 +17,21 @@ from pathlib import Path
 
 import click
 
-from cli.options import check_output_file, joint_topic_option, json_option, overwrite_option
+from cli.options import (
+    MAX_URDF_BYTES,
+    InputFile,
+    InputPath,
+    check_output_file,
+    joint_topic_option,
+    json_option,
+    overwrite_option,
+    result,
+    status,
+)
 
 
 @click.command("robot")
-@click.argument("urdf", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.argument("urdf", type=InputFile(max_bytes=MAX_URDF_BYTES))
 @click.option("--base-link", default=None, metavar="LINK",
               help="URDF link the chain starts at (default: the URDF's root).")
 @click.option("--tip-link", default=None, metavar="LINK",
@@ -29,7 +39,7 @@ from cli.options import check_output_file, joint_topic_option, json_option, over
 @click.option("--package-path", "package_paths", multiple=True,
               type=click.Path(file_okay=False, exists=True, path_type=Path),
               help="Folder resolving package:// meshes (repeatable).")
-@click.option("--log", "log_path", type=click.Path(exists=True, path_type=Path), default=None,
+@click.option("--log", "log_path", type=InputPath(), default=None,
               help="A run log: cut the chain to the joints it drives and list the ones ignored.")
 @joint_topic_option
 @click.option("--write-capsules", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -60,7 +70,7 @@ def command(urdf: Path, base_link: str | None, tip_link: str | None,
                      f"{chain.chain.base} -> {chain.chain.tip}; tip: {chain.tip_note}")
         write_text_atomic(write_capsules, robot_to_urdf(robot, notes=notes))
     if as_json:
-        click.echo(json.dumps({
+        result(json.dumps({
             "urdf": str(urdf), "name": robot.name, "base_link": chain.chain.base,
             "tip_link": chain.chain.tip, "joints": list(robot.joint_names),
             "links": [{"urdf_link": chain.link_names[i], "joint": robot.joint_names[i],
@@ -74,14 +84,12 @@ def command(urdf: Path, base_link: str | None, tip_link: str | None,
             "ignored_log_joints": ignored,
             "capsules": None if write_capsules is None else str(write_capsules)}, indent=2))
         return
-    for line in chain.describe():
-        click.echo(line)
-    for name, why in ignored.items():
-        click.echo(f"  log joint {name!r} ignored: {why}")
+    result("\n".join([*chain.describe(),
+                       *(f"  log joint {name!r} ignored: {why}" for name, why in ignored.items())]))
     for warning in caught:
-        click.echo(f"note: {warning.message}", err=True)
+        status(f"note: {warning.message}")
     if write_capsules is not None:
-        click.echo(f"wrote {write_capsules}")
+        status(f"wrote {write_capsules}")
 
 
 def _log_joints(path: Path, joint_topic: str | None) -> tuple[str, ...]:
@@ -89,8 +97,10 @@ def _log_joints(path: Path, joint_topic: str | None) -> tuple[str, ...]:
     from wholearm_tools.logs.bags import scan_log
     from wholearm_tools.logs.decoders import JointStateColumns
     from wholearm_tools.logs.reader import _select_joint_topic
+    from wholearm_tools.logs.scan import check_log_path
     from wholearm_tools.logs.schemas import JOINT_STATE
 
+    check_log_path(path)
     scan = scan_log(path, lambda topic, schema: schema == JOINT_STATE
                     and (joint_topic is None or topic == joint_topic))
     topic = _select_joint_topic(scan, joint_topic, None)

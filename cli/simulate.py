@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -9,7 +10,21 @@ from typing import Any
 
 import click
 
-from cli.options import check_output_file, overwrite_option, progress_enabled
+from cli.options import (
+    check_output_file,
+    json_option,
+    overwrite_option,
+    progress_enabled,
+    result,
+    status,
+)
+
+#: most log samples (rate x duration) one simulated run may hold: a run is held in memory
+#: several times over while it is simulated and written (2 million samples of a 7-joint arm
+#: are about 1 GB at the peak)
+MAX_SAMPLES = 2_000_000
+#: largest scenario file read [bytes]
+MAX_SCENARIO_BYTES = 16 * 2**20
 
 #: CLI physics option → ``Physics`` field it sets
 _PHYSICS_OPTIONS = {
@@ -22,15 +37,34 @@ _PHYSICS_OPTIONS = {
 }
 
 
+def _scenario_source(scenario: str) -> None:
+    """A scenario given as a file must exist as a bounded regular UTF-8 file (not a FIFO or a
+    device): otherwise a usage error, like any missing input file.  Bundled names are left
+    to the loader."""
+    from wholearm_tools._io import check_input_file, read_text_input
+    from wholearm_tools.errors import ScenarioError
+
+    path = Path(scenario)
+    if scenario.endswith((".yaml", ".yml")) or path.exists():
+        if not path.exists():
+            raise click.BadParameter(f"File {scenario!r} does not exist.",
+                                     param_hint="'SCENARIO'")
+        try:
+            check_input_file(path, "scenario", max_bytes=MAX_SCENARIO_BYTES, error=ScenarioError)
+        except ScenarioError as exc:
+            raise click.BadParameter(str(exc), param_hint="'SCENARIO'") from None
+        read_text_input(path, "scenario", max_bytes=MAX_SCENARIO_BYTES, error=ScenarioError)
+
+
 @click.command("simulate")
 @click.argument("scenario")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="MCAP file to write.")
 @click.option("--seed", type=int, default=None, help="Random seed (default: the scenario's).")
-@click.option("--rate", type=click.FloatRange(min=1.0), default=None,
+@click.option("--rate", type=click.FloatRange(min=1.0, max=100_000.0), default=None,
               help="Log rate in Hz (default: the scenario's, usually 500).")
-@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Arm time to simulate in seconds (default: the scenario's).")
+@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True, max=86_400.0),
+              default=None, help="Arm time to simulate in seconds (default: the scenario's).")
 @click.option("--strategy", type=str, default=None,
               help="Exploration strategy: random, sweep or novelty (default: the scenario's).")
 @click.option("--profile", type=click.Choice(["ros2", "json"]), default="ros2",
@@ -60,19 +94,18 @@ _PHYSICS_OPTIONS = {
               help="[physics] Smallest physics rate in Hz (default: the scenario's, 1000).")
 @click.option("--mjcf", "mjcf_file", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="[physics] Also write the MuJoCo scene (MJCF) to this file.")
+@json_option
 @overwrite_option
 def command(scenario: str, output: Path, seed: int | None, rate: float | None,
             duration: float | None, strategy: str | None, profile: str, engine: str,
-            mjcf_file: Path | None, overwrite: bool, **physics_options: Any) -> None:
+            mjcf_file: Path | None, as_json: bool, overwrite: bool,
+            **physics_options: Any) -> None:
     """Simulate SCENARIO (a bundled name or a YAML path) and write the run to OUTPUT."""
     from wholearm_tools.logs import write_run
     from wholearm_tools.sim.scenarios import load_scenario
     from wholearm_tools.sim.strategies import STRATEGIES
 
     check_output_file(output, overwrite)
-    folder = output.parent if str(output.parent) else Path(".")
-    if not folder.is_dir():
-        raise click.ClickException(f"{output}: output folder {folder} does not exist")
     if strategy is not None and strategy not in STRATEGIES:
         raise click.ClickException(
             f"unknown strategy {strategy!r} (known: {', '.join(sorted(STRATEGIES))})")
@@ -82,10 +115,16 @@ def command(scenario: str, output: Path, seed: int | None, rate: float | None,
         raise click.ClickException(f"{', '.join(names)} apply to --engine physics only")
     if mjcf_file is not None:
         check_output_file(mjcf_file, overwrite)
+    _scenario_source(scenario)
     sc = load_scenario(scenario)
     physics = sc.physics.replace(**{_PHYSICS_OPTIONS[k]: v for k, v in given.items()})
-    wall0 = time.perf_counter()
     total = sc.duration if duration is None else duration
+    hz = sc.rate if rate is None else rate
+    if hz * total > MAX_SAMPLES:
+        raise click.BadParameter(
+            f"{hz:g} Hz for {total:g} s is {hz * total:.3g} samples; at most {MAX_SAMPLES:,} "
+            "per run (lower --rate or --duration)", param_hint="--rate/--duration")
+    wall0 = time.perf_counter()
     run_args = {"seed": seed, "duration": duration, "rate": rate, "strategy": strategy,
                 "engine": engine, "physics": physics}
     if progress_enabled():
@@ -98,25 +137,37 @@ def command(scenario: str, output: Path, seed: int | None, rate: float | None,
                 bar.update(pos - done[0])
                 done[0] = pos
 
-            result = sc.simulate(progress=progress, **run_args)
+            sim = sc.simulate(progress=progress, **run_args)
     else:
-        result = sc.simulate(**run_args)
-    write_run(output, result.run, profile=profile)
+        sim = sc.simulate(**run_args)
+    write_run(output, sim.run, profile=profile)
     if mjcf_file is not None:
         from wholearm_tools._io import write_text_atomic
 
-        write_text_atomic(mjcf_file, result.stats["mjcf"])
+        write_text_atomic(mjcf_file, sim.stats["mjcf"])
     wall = time.perf_counter() - wall0
-    counts = result.contact_counts()
-    log = result.run.log
-    truth = result.truth
+    counts = sim.contact_counts()
+    log = sim.run.log
+    truth = sim.truth
     stopped = ""
     if engine == "physics":
         stopped = f", {int(truth.contact_stopped.sum())} stopped the arm"
-    click.echo(
+    surfaces = len(set(truth.contact_surface.tolist()))
+    if as_json:
+        result(json.dumps({
+            "scenario": sc.name, "output": str(output), "profile": profile, "engine": engine,
+            "duration_s": float(log.duration), "rate_hz": float(log.rate),
+            "samples": int(log.n_samples), "moves": len(sim.moves),
+            "strategy": str(truth.meta["strategy"]), "seed": int(truth.meta["seed"]),
+            "contacts": int(truth.n_contacts),
+            "contacts_by_kind": {k: int(v) for k, v in counts.items()},
+            "surfaces_touched": surfaces, "surfaces": len(truth.surfaces),
+            "wall_time_s": wall}))
+        return
+    status(
         f"{sc.name}: simulated {log.duration:.1f} s at {log.rate:.0f} Hz ({log.n_samples} samples,"
-        f" {len(result.moves)} moves) with the {engine} engine, strategy "
+        f" {len(sim.moves)} moves) with the {engine} engine, strategy "
         f"{truth.meta['strategy']} and seed {truth.meta['seed']}; {truth.n_contacts} contacts "
         f"(tip {counts['tip']}, joint {counts['joint']}, body {counts['body']}{stopped}) on "
-        f"{len(set(truth.contact_surface.tolist()))} of {len(truth.surfaces)} "
-        f"surfaces; wrote {output} ({profile}) in {wall:.1f} s wall time.")
+        f"{surfaces} of {len(truth.surfaces)} surfaces; wrote {output} ({profile}) in "
+        f"{wall:.1f} s wall time.")

@@ -1,8 +1,25 @@
-"""How many processes this machine gives us."""
+"""Process pools that behave on Ctrl-C, and how many processes this machine gives us.
+
+A terminal's Ctrl-C sends SIGINT to every process of the foreground group: the workers of a
+pool too.  Left alone, each worker prints its own KeyboardInterrupt traceback and the pool
+then reports itself broken.  :func:`process_pool` starts its workers with SIGINT ignored (the
+signal is blocked while they are forked, so none can receive it before it ignores it), and when
+the body of the ``with`` block is left by an exception (the main process's KeyboardInterrupt,
+or any error) it cancels what is queued and stops the workers instead of waiting for them, so
+the main process alone reports, once.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+#: seconds to wait for a terminated worker before killing it
+_STOP_TIMEOUT = 2.0
 
 
 def available_cores() -> int:
@@ -11,3 +28,74 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def _worker_init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:
+    """First thing a worker does: ignore SIGINT (the main process handles Ctrl-C), then let
+    the signal through again (it was blocked while the worker was forked)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def _noop() -> None:
+    return None
+
+
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT held back in this thread (and in processes forked meanwhile) within the block; a
+    Ctrl-C pressed meanwhile is delivered when the block ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel queued work and stop the workers now (running tasks are abandoned)."""
+    # ProcessPoolExecutor has no public way to stop running workers before Python 3.14; its
+    # process table is dropped by shutdown, so it is read first
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            proc.terminate()
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            proc.join(_STOP_TIMEOUT)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(_STOP_TIMEOUT)
+
+
+@contextlib.contextmanager
+def process_pool(max_workers: int, *, mp_context: Any = None,
+                 initializer: Callable[..., Any] | None = None,
+                 initargs: tuple[Any, ...] = ()) -> Iterator[ProcessPoolExecutor]:
+    """A :class:`~concurrent.futures.ProcessPoolExecutor` whose workers ignore SIGINT.
+
+    On a normal exit the pool is shut down after its work is done; when the block raises
+    (KeyboardInterrupt included), queued work is cancelled and the workers are stopped at
+    once, and the exception propagates.
+    """
+    pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=mp_context,
+                               initializer=_worker_init, initargs=(initializer, initargs))
+    try:
+        with _sigint_blocked():
+            pool.submit(_noop)  # starts the workers (a forking pool starts all of them here)
+    except BaseException:
+        _stop(pool)
+        raise
+    try:
+        yield pool
+    except BaseException:
+        _stop(pool)
+        raise
+    pool.shutdown(wait=True)

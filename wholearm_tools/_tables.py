@@ -1,10 +1,11 @@
 """Row tables on disk: CSV, or Parquet by the ``.parquet`` suffix (typed columns, via pyarrow).
 
 Rows are dicts of column name to value as the CSV holds it (``str`` or a number; ``""`` for an
-empty cell).  In Parquet, a column whose cells all read as integers is ``int64``, one whose
-cells all read as numbers is ``float64``, anything else ``string``; empty cells are nulls.
-Reading either format gives the same rows (numbers as their shortest round-trip text), so a
-reader written for the CSV reads the Parquet file unchanged.
+empty cell).  Every column has a declared type, one of :data:`COLUMN_TYPES` (``int64``,
+``float64``, ``string``): the Parquet schema and the typed rows of ``--json`` outputs follow
+the declaration, never the data, so a file's schema is the same for every run; empty cells are
+nulls.  Reading either format gives the same rows (numbers as their shortest round-trip text),
+so a reader written for the CSV reads the Parquet file unchanged.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from wholearm_tools._io import atomic_output
+from wholearm_tools._io import MAX_TEXT_BYTES, atomic_output, check_input_file, read_text_input
 from wholearm_tools.errors import InputError
 
 #: key of the JSON metadata in a Parquet file's schema
@@ -27,12 +28,18 @@ def is_parquet(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".parquet"
 
 
+#: the column types a table can declare
+COLUMN_TYPES = ("int64", "float64", "string")
+
+
 def write_rows(path: str | Path, fields: Sequence[str], rows: Sequence[Mapping[str, Any]],
-               meta: Mapping[str, Any] | None = None) -> None:
-    """Write ``rows`` (columns ``fields``, in order) to ``path`` atomically; ``meta`` (JSON) is
-    stored in a Parquet file's schema metadata and not in a CSV."""
+               types: Mapping[str, str], meta: Mapping[str, Any] | None = None) -> None:
+    """Write ``rows`` (columns ``fields``, in order, of declared ``types``) to ``path``
+    atomically; ``meta`` (JSON) is stored in a Parquet file's schema metadata and not in a
+    CSV."""
+    _check_types(fields, types)
     if is_parquet(path):
-        _write_parquet(path, fields, rows, meta)
+        _write_parquet(path, fields, rows, types, meta)
         return
     with atomic_output(path, "w") as fh:
         fh.write(csv_text(fields, rows))
@@ -53,22 +60,24 @@ def csv_rows(text: str) -> list[dict[str, str]]:
 
 
 def read_rows(path: str | Path) -> list[dict[str, str]]:
-    """Rows of a CSV or Parquet table, every cell as text (``""`` where empty)."""
+    """Rows of a CSV or Parquet table, every cell as text (``""`` where empty); a file that is
+    not a bounded regular file, not UTF-8, or not a table raises InputError naming it."""
     path = Path(path)
     if not is_parquet(path):
+        text = read_text_input(path, "table")
         try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-        return csv_rows(text)
+            return csv_rows(text)
+        except csv.Error as exc:
+            raise InputError(f"{path}: not a readable CSV table ({exc})") from None
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    check_input_file(path, "Parquet table", max_bytes=MAX_TEXT_BYTES)
     try:
         table = pq.read_table(path)
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    except pa.ArrowInvalid as exc:
+    except pa.ArrowException as exc:
         raise InputError(f"{path}: not a readable Parquet file ({exc})") from None
     columns = {name: [_text(v) for v in table.column(name).to_pylist()]
                for name in table.column_names}
@@ -91,39 +100,45 @@ def _text(value: Any) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
+def _check_types(fields: Sequence[str], types: Mapping[str, str]) -> None:
+    undeclared = [name for name in fields if types.get(name) not in COLUMN_TYPES]
+    if undeclared:
+        raise ValueError(f"columns without a declared type: {undeclared}")
+
+
+def typed_cell(cell: Any, kind: str) -> int | float | str | None:
+    """One cell as its declared type (``None`` for an empty cell; NaN for a float ``nan``)."""
+    if cell is None or (isinstance(cell, str) and cell == ""):
+        return None
+    if kind == "int64":
+        if isinstance(cell, float) or (isinstance(cell, str) and not cell.strip().lstrip(
+                "+-").isdigit()):
+            raise ValueError(f"not an integer: {cell!r}")
+        return int(cell)
+    if kind == "float64":
+        return float(cell)
+    return str(cell)
+
+
+def typed_rows(fields: Sequence[str], rows: Sequence[Mapping[str, Any]],
+               types: Mapping[str, str]) -> list[dict[str, Any]]:
+    """``rows`` with every cell converted to its column's declared type (for JSON output)."""
+    _check_types(fields, types)
+    return [{name: typed_cell(row.get(name, ""), types[name]) for name in fields}
+            for row in rows]
+
+
 def _write_parquet(path: str | Path, fields: Sequence[str], rows: Sequence[Mapping[str, Any]],
-                   meta: Mapping[str, Any] | None) -> None:
+                   types: Mapping[str, str], meta: Mapping[str, Any] | None) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    arrays = {name: _typed([row.get(name, "") for row in rows]) for name in fields}
-    table = pa.table(arrays)
+    arrow = {"int64": pa.int64(), "float64": pa.float64(), "string": pa.string()}
+    schema = pa.schema([(name, arrow[types[name]]) for name in fields])
     if meta:
-        table = table.replace_schema_metadata({META_KEY: json.dumps(dict(meta)).encode()})
+        schema = schema.with_metadata({META_KEY: json.dumps(dict(meta)).encode()})
+    columns = [pa.array([typed_cell(row.get(name, ""), types[name]) for row in rows],
+                        type=arrow[types[name]]) for name in fields]
+    table = pa.Table.from_arrays(columns, schema=schema)
     with atomic_output(path, "wb") as fh:
         pq.write_table(table, fh)
-
-
-def _typed(cells: list[Any]) -> Any:
-    """One column as a pyarrow array: int64, float64 or string (see the module docstring)."""
-    import pyarrow as pa
-
-    if all(_empty(c) for c in cells):
-        return pa.nulls(len(cells), type=pa.string())
-    for parse, kind in ((_integer, pa.int64()), (float, pa.float64())):
-        try:
-            return pa.array([None if _empty(c) else parse(c) for c in cells], type=kind)
-        except (TypeError, ValueError):
-            pass
-    return pa.array([None if _empty(c) else str(c) for c in cells], type=pa.string())
-
-
-def _empty(cell: Any) -> bool:
-    return cell is None or (isinstance(cell, str) and cell == "")
-
-
-def _integer(cell: Any) -> int:
-    """``int`` of an integer or of integer text; a float or other text raises ValueError."""
-    if isinstance(cell, (bool, float)):
-        raise ValueError(f"not an integer: {cell!r}")
-    return int(cell)

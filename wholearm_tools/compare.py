@@ -36,6 +36,7 @@ rules).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import io
@@ -52,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from wholearm_tools._io import atomic_path, write_text_atomic
-from wholearm_tools._parallel import available_cores
+from wholearm_tools._parallel import available_cores, process_pool
 from wholearm_tools.errors import InputError, WholearmError
 
 #: output file names written by :func:`write_comparison`
@@ -321,6 +322,7 @@ def compare_runs(paths: Iterable[str | os.PathLike[str]], Bs: Iterable[float], *
                  scheduler: Any = None, workers: int | None = None,
                  read_options: Mapping[str, Any] | None = None,
                  reconstruct: ReconstructFn | None = None,
+                 progress: Callable[[int, int], None] | None = None,
                  **reconstruct_options: Any) -> ComparisonTable:
     """Reconstruct every (log, B) pair and tabulate the results.
 
@@ -336,6 +338,8 @@ def compare_runs(paths: Iterable[str | os.PathLike[str]], Bs: Iterable[float], *
     read_options : keyword arguments of :func:`wholearm_tools.logs.read_run` (robot, topics)
     reconstruct : the reconstruction function (default :func:`wholearm_tools.pipeline
         .reconstruct`); must be picklable (a module-level function) for parallel runs
+    progress : called as ``progress(done, total)`` each time a pair is finished (in the
+        calling process, in completion order)
     **reconstruct_options : keyword arguments of the reconstruction (``causal``, ``loss``, ...)
 
     Returns
@@ -360,10 +364,11 @@ def compare_runs(paths: Iterable[str | os.PathLike[str]], Bs: Iterable[float], *
     task: Callable[..., dict[str, Any]] = (
         comparison_row if reconstruct is None
         else functools.partial(comparison_row, reconstruct=reconstruct))
+    done = _Counter(len(pairs), progress)
     if scheduler is not None:
-        rows = _run_dask(task, pairs, options, scheduler)
+        rows = _run_dask(task, pairs, options, scheduler, done)
     else:
-        rows = _run_local(task, pairs, options, workers)
+        rows = _run_local(task, pairs, options, workers, done)
     return ComparisonTable(rows=tuple(rows), options=_jsonable(options))
 
 
@@ -380,25 +385,46 @@ def _check_Bs(Bs: Iterable[float]) -> list[float]:  # noqa: N802
     return sorted(set(values))
 
 
+class _Counter:
+    """Counts finished pairs and reports them to an optional ``progress(done, total)``."""
+
+    def __init__(self, total: int, progress: Callable[[int, int], None] | None) -> None:
+        self.total, self.done, self.progress = total, 0, progress
+
+    def tick(self, *_: Any) -> None:
+        self.done += 1
+        if self.progress is not None:
+            self.progress(self.done, self.total)
+
+
 def _run_local(task: Callable[..., dict[str, Any]], pairs: Sequence[tuple[str, float]],
-               options: dict[str, Any], workers: int | None) -> list[dict[str, Any]]:
+               options: dict[str, Any], workers: int | None, done: _Counter
+               ) -> list[dict[str, Any]]:
+    from concurrent.futures import as_completed
+
     cores = available_cores()
     n = min(len(pairs), workers or cores, cores)
     if n <= 1:
-        return [task(p, b, options) for p, b in pairs]
-    from concurrent.futures import ProcessPoolExecutor
-
+        rows = []
+        for p, b in pairs:
+            rows.append(task(p, b, options))
+            done.tick()
+        return rows
     # the platform's default start method (fork on Linux): workers need no re-import of the
-    # caller's script, so a plain script without a ``__main__`` guard works
-    with ProcessPoolExecutor(max_workers=n) as pool:
+    # caller's script, so a plain script without a ``__main__`` guard works; workers ignore
+    # Ctrl-C and are stopped when the main process is interrupted
+    with process_pool(n) as pool:
         futures = [pool.submit(task, p, b, options) for p, b in pairs]
+        for _ in as_completed(futures):
+            done.tick()
         return [_result_or_error(f.result, p, b) for f, (p, b) in
                 zip(futures, pairs, strict=True)]
 
 
 def _run_dask(task: Callable[..., dict[str, Any]], pairs: Sequence[tuple[str, float]],
-              options: dict[str, Any], scheduler: Any) -> list[dict[str, Any]]:
-    from distributed import Client
+              options: dict[str, Any], scheduler: Any, done: _Counter
+              ) -> list[dict[str, Any]]:
+    from distributed import Client, as_completed
 
     if isinstance(scheduler, Client):
         client, owned = scheduler, False
@@ -415,8 +441,15 @@ def _run_dask(task: Callable[..., dict[str, Any]], pairs: Sequence[tuple[str, fl
         paths = [p for p, _ in pairs]
         Bs = [b for _, b in pairs]
         futures = client.map(task, paths, Bs, [options] * len(pairs), pure=False)
-        return [_result_or_error(f.result, p, b) for f, (p, b) in
-                zip(futures, pairs, strict=True)]
+        try:
+            for _ in as_completed(futures):
+                done.tick()
+            return [_result_or_error(f.result, p, b) for f, (p, b) in
+                    zip(futures, pairs, strict=True)]
+        except BaseException:  # Ctrl-C: do not leave the cluster working for nobody
+            with contextlib.suppress(Exception):
+                client.cancel(futures)
+            raise
     finally:
         if owned:
             client.close()

@@ -162,6 +162,10 @@ class ContactTable:
             rows.append(dict(zip(header, cells, strict=True)))
         return header, rows
 
+    def column_types(self) -> dict[str, str]:
+        """The declared type of every column of :meth:`rows` (the Parquet schema)."""
+        return table_column_types(self.dim)
+
     def to_csv(self) -> str:
         from wholearm_tools._tables import csv_text
 
@@ -231,6 +235,20 @@ class ContactTable:
             return cls(**fields)
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
+
+
+def table_column_types(dim: int) -> dict[str, str]:
+    """Declared types of the contact table's columns for ``dim``-D contacts (``int64``,
+    ``float64`` or ``string``; see :mod:`wholearm_tools._tables`)."""
+    axes = "xyz"[:dim]
+    types = {"t": "float64", "link": "int64", "p_tip": "float64", "label": "string",
+             "variance": "float64", "used_as": "string"}
+    types.update({f"tip_{c}": "float64" for c in axes})
+    types["tip_radius"] = "float64"
+    types.update({f"{p}_{c}": "float64" for p in ("a", "b") for c in axes})
+    types.update({"link_radius": "float64", "primitive": "int64", "residual": "float64",
+                  "p_tip_map": "float64", "label_map": "string", "link_by_map": "int64"})
+    return types
 
 
 def write_contact_table(path: str | Path, table: ContactTable) -> None:

@@ -138,25 +138,114 @@ class SurfaceMap:
 
     @classmethod
     def from_json(cls, data: Any, source: str = "map.json") -> SurfaceMap:
+        """Validate and load the JSON of a map; every error names ``source`` and the field."""
         if not isinstance(data, Mapping) or data.get("format") != MAP_FORMAT:
             raise InputError(f"{source}: not a wholearm map (expected \"format\": "
                              f"\"{MAP_FORMAT}\")")
         if data.get("version") != MAP_VERSION:
             raise InputError(f"{source}: map version {data.get('version')!r} is not supported "
                              f"(this wholearm reads version {MAP_VERSION})")
+        for key in ("planar", "B", "primitives"):
+            if key not in data:
+                raise InputError(f"{source}: malformed map (no field {key!r})")
+        if not isinstance(data["planar"], bool):
+            raise InputError(f"{source}: field 'planar' must be true or false, got "
+                             f"{_shown(data['planar'])}")
+        planar = data["planar"]
+        dim = 2 if planar else 3
+        B = data["B"]
+        if (isinstance(B, bool) or not isinstance(B, (int, float)) or not math.isfinite(B)
+                or not 0 < B <= MAX_LENGTH):
+            raise InputError(f"{source}: field 'B' must be a positive length in metres (at "
+                             f"most {MAX_LENGTH:g}), got {_shown(B)}")
+        if not isinstance(data["primitives"], list):
+            raise InputError(f"{source}: field 'primitives' must be a list")
+        primitives = tuple(_primitive(p, i, dim, source)
+                           for i, p in enumerate(data["primitives"]))
+        for name in ("contacts", "meta"):
+            if not isinstance(data.get(name, {}), Mapping):
+                raise InputError(f"{source}: field {name!r} must be an object")
         try:
-            planar = bool(data["planar"])
-            dim = 2 if planar else 3
             unexplained = np.array(data.get("unexplained", []), dtype=float).reshape(-1, dim)
-            return cls(
-                planar=planar, B=float(data["B"]),
-                primitives=tuple(MappedPrimitive.from_json(p) for p in data["primitives"]),
-                contacts={k: int(v) for k, v in data.get("contacts", {}).items()},
-                unexplained=unexplained, frame=str(data.get("frame", "base_link")),
-                meta=dict(data.get("meta", {})),
-            )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"{source}: malformed map ({type(exc).__name__}: {exc})") from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{source}: field 'unexplained' must be a list of {dim}-D points "
+                             f"({type(exc).__name__})") from None
+        try:
+            contacts = {str(k): int(v) for k, v in data.get("contacts", {}).items()}
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{source}: field 'contacts' must hold counts "
+                             f"({type(exc).__name__})") from None
+        _check_lengths(unexplained, f"{source}: field 'unexplained'")
+        return cls(planar=planar, B=float(B), primitives=primitives, contacts=contacts,
+                   unexplained=unexplained, frame=str(data.get("frame", "base_link")),
+                   meta=dict(data.get("meta", {})))
+
+
+#: largest coordinate or length a map may hold [m]: far beyond any arm's reach, small enough
+#: that meshes and reports stay finite
+MAX_LENGTH = 1e3
+
+
+def _shown(value: Any) -> str:
+    """A value from an input file, shown short (never more than 40 characters)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _check_lengths(values: Any, where: str) -> None:
+    """InputError unless every number in ``values`` is finite and within ±MAX_LENGTH."""
+    arr = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{where} holds a non-finite number")
+    if arr.size and float(np.max(np.abs(arr))) > MAX_LENGTH:
+        raise InputError(f"{where} holds {float(np.max(np.abs(arr))):.3g}, beyond "
+                         f"{MAX_LENGTH:g} m")
+
+
+def _numbers(value: Any) -> list[float]:
+    """Every number inside a JSON value (lists and objects walked; strings and bools not)."""
+    out: list[float] = []
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, Mapping):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, (int, float)) and not isinstance(item, bool):
+            out.append(float(item))
+        elif item is None:
+            out.append(float("nan"))
+    return out
+
+
+def _primitive(data: Any, index: int, dim: int, source: str) -> MappedPrimitive:
+    """One validated primitive of a map: known type of the map's dimension, parameters that
+    build the geometry, finite bounded parameters and extent."""
+    from wholearm_tools.geometry.base import primitive_type
+
+    where = f"{source}: primitives[{index}]"
+    if not isinstance(data, Mapping):
+        raise InputError(f"{where} must be an object")
+    kind = data.get("type")
+    where = f"{where} ({kind})" if isinstance(kind, str) else where
+    try:
+        cls = primitive_type(str(kind))
+        if cls.dim != dim:
+            raise InputError(f"a {cls.dim}-D type in a {dim}-D map")
+        if not isinstance(data.get("params"), Mapping):
+            raise InputError("no 'params' object")
+        if not isinstance(data.get("extent", {}), Mapping):
+            raise InputError("'extent' must be an object")
+        _check_lengths(_numbers(data["params"]), "'params'")
+        _check_lengths(_numbers(data.get("extent", {})), "'extent'")
+        prim = MappedPrimitive.from_json(data)
+        prim.primitive  # noqa: B018 - builds the geometry, which validates every parameter
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{where}: malformed ({type(exc).__name__}: {exc})") from None
+    return prim
 
 
 def write_map(path: str | Path, surface_map: SurfaceMap) -> None:
@@ -166,12 +255,10 @@ def write_map(path: str | Path, surface_map: SurfaceMap) -> None:
 
 
 def read_map(path: str | Path) -> SurfaceMap:
-    """Read a map.json file; malformed files and other versions raise InputError."""
+    """Read a map.json file (a regular file of bounded size, UTF-8, bounded nesting);
+    malformed files and other versions raise InputError naming the file and the field."""
+    from wholearm_tools._io import load_json, read_text_input
+
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read map ({exc.strerror})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
-    return SurfaceMap.from_json(data, source=str(path))
+    text = read_text_input(path, "map")
+    return SurfaceMap.from_json(load_json(text, str(path), "JSON"), source=str(path))

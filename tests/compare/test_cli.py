@@ -18,7 +18,8 @@ def _run(*args: object):
 def _one_line_error(result: Result) -> str:
     assert result.exit_code != 0
     assert result.exception is None or isinstance(result.exception, SystemExit)
-    lines = result.stderr.strip().splitlines()
+    assert "Traceback" not in result.output
+    lines = [ln for ln in result.stderr.strip().splitlines() if not ln.startswith("wrote ")]
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("Error: ")
     return lines[0]
@@ -32,7 +33,8 @@ def test_table_printed_and_outputs_written(logs: dict[str, Path], tmp_path: Path
     assert lines[0].startswith("log ")
     assert [ln.split()[:2] for ln in lines[1:3]] == [["circle_a.mcap", "0.05"],
                                                      ["empty.mcap", "0.05"]]
-    assert lines[3].startswith("wrote ")
+    assert len(lines) == 3  # the table on stdout; what was written is status on stderr
+    assert result.stderr.startswith("wrote ")
     assert sorted(p.name for p in out.iterdir()) == sorted(OUTPUT_NAMES)
     # existing outputs are refused without --overwrite, replaced with it
     line = _one_line_error(_run(logs["empty"], "--B", 0.05, "-o", out))
@@ -44,9 +46,11 @@ def test_table_printed_and_outputs_written(logs: dict[str, Path], tmp_path: Path
     assert json.loads((out / "comparison.json").read_text())["rows"] == data["rows"]
 
 
-def test_missing_log_is_a_one_line_error(logs: dict[str, Path], tmp_path: Path) -> None:
-    line = _one_line_error(_run(logs["missing"], "--B", 0.02, "-o", tmp_path / "cmp"))
-    assert "missing.mcap: no such log file" in line
+def test_missing_log_is_a_usage_error(logs: dict[str, Path], tmp_path: Path) -> None:
+    result = _run(logs["missing"], "--B", 0.02, "-o", tmp_path / "cmp")
+    assert result.exit_code == 2
+    assert "missing.mcap' does not exist" in result.stderr
+    assert "Traceback" not in result.output
     assert not (tmp_path / "cmp").exists()
 
 
@@ -61,7 +65,7 @@ def test_unreadable_log_fails_after_writing_the_table(logs: dict[str, Path],
 
 
 def test_bad_option_values(logs: dict[str, Path], tmp_path: Path) -> None:
-    for args in (["--B", "-1"], ["--B", "0.02", "--workers", "0"], []):
+    for args in (["--B", "-1"], ["--B", "0.02", "--workers", "0"], ["--B", "inf"]):
         result = _run(logs["empty"], *args, "-o", tmp_path / "cmp")
         assert result.exit_code == 2
         assert "Error" in result.stderr

@@ -78,6 +78,12 @@ def test_contacts_parquet_holds_the_csv_columns_typed(mcap: Path, tmp_path: Path
     assert table.schema.field("label").type == pa.string()
     assert table.column("primitive").null_count == 0  # -1 before fitting
     assert table.column("residual").null_count == len(rows)  # empty before fitting
+    # declared types, whatever the cells hold: empty columns keep theirs
+    assert table.schema.field("residual").type == pa.float64()
+    assert table.schema.field("link_by_map").type == pa.int64()
+    assert table.schema.field("label_map").type == pa.string()
+    assert table.schema.field("consistent").type == pa.int64()
+    assert table.schema.field("true_kind").type == pa.string()
     p_tip = table.column("p_tip").to_pylist()
     assert p_tip == [float(r["p_tip"]) for r in rows]
     assert read_meta(pq_out) == {"run": str(mcap), "B": 0.02, "causal": False}
@@ -105,9 +111,15 @@ def test_fit_of_a_broken_parquet_file_is_a_one_line_error(tmp_path: Path) -> Non
 def test_contacts_json_and_table(mcap: Path) -> None:
     res = run("contacts", str(mcap), "--B", "0.02", "--json", "--causal")
     assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
+    doc = json.loads(res.stdout)
     assert doc["causal"] is True
     assert doc["contacts"]
+    first = doc["contacts"][0]  # typed numbers, as in the Parquet schema
+    assert isinstance(first["t"], float)
+    assert isinstance(first["link"], int)
+    assert isinstance(first["p_tip"], float)
+    assert first["residual"] is None
+    assert isinstance(first["label"], str)
     res = run("contacts", str(mcap), "--B", "0.02")
     assert res.exit_code == 0, res.output
     assert "P_T" in res.output.splitlines()[0]
@@ -120,11 +132,16 @@ def test_plot_ptip_writes_png(mcap: Path, tmp_path: Path) -> None:
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_missing_b_is_a_usage_error(mcap: Path) -> None:
-    res = run("contacts", str(mcap))
-    assert res.exit_code == 2
-    assert "--B" in res.output
-    assert "Traceback" not in res.output
+def test_b_defaults_to_2_cm_and_is_bounded_by_the_reach(mcap: Path) -> None:
+    default = run("contacts", str(mcap), "--json")
+    assert default.exit_code == 0, default.output
+    typed = run("contacts", str(mcap), "--json", "--B", "0.02")
+    assert json.loads(default.stdout)["contacts"] == json.loads(typed.stdout)["contacts"]
+    assert json.loads(default.stdout)["B"] == 0.02
+    far = run("contacts", str(mcap), "--B", "1e9")
+    assert far.exit_code == 1
+    assert "--B = 1e+09 m is larger than the robot's reach" in far.output
+    assert len(far.output.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
@@ -168,9 +185,9 @@ def test_existing_output_is_refused(mcap: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("command", ["contacts", "plot-ptip"])
-@pytest.mark.parametrize("b_args", [[], ["--B", "-1"], ["--B", "0"]])
-def test_a_missing_or_non_positive_b_is_a_usage_error(command: str, b_args: list[str],
-                                                      mcap: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("b_args", [["--B", "-1"], ["--B", "0"], ["--B", "nan"]])
+def test_a_non_positive_b_is_a_usage_error(command: str, b_args: list[str],
+                                           mcap: Path, tmp_path: Path) -> None:
     res = run(command, str(mcap), *b_args, "-o", str(tmp_path / "out.png"))
     assert res.exit_code == 2
     assert "--B" in res.output

@@ -164,9 +164,16 @@ def test_nan_positions(tmp_path, robot):
     bad = JointLog(log.joint_names, log.t, q, log.qd, t0_ns=log.t0_ns)
     path = tmp_path / "nan.mcap"
     write_run(path, Run(robot=robot, log=bad))
-    with pytest.raises(LogFormatError, match=r"nan\.mcap: topic '/joint_states': 1 NaN or "
-                                             r"missing positions \(first: joint 'joint_2' at "
+    with pytest.raises(LogFormatError, match=r"nan\.mcap: topic '/joint_states': 1 NaN "
+                                             r"positions \(first: joint 'joint_2' at "
                                              r"t = 0\.050000 s\)"):
+        read_run(path)
+    q[5, 1] = np.inf
+    path = tmp_path / "inf.mcap"
+    write_run(path, Run(robot=robot, log=JointLog(log.joint_names, log.t, q, log.qd,
+                                                  t0_ns=log.t0_ns)))
+    with pytest.raises(LogFormatError, match=r"inf\.mcap: topic '/joint_states': 1 infinite "
+                                             r"positions \(first: joint 'joint_2'"):
         read_run(path)
 
 
@@ -266,3 +273,89 @@ def test_robot_description_must_be_a_valid_urdf(tmp_path):
         writer.finish()
     with pytest.raises(RobotModelError, match=r"badurdf\.mcap /robot_description"):
         read_run(path)
+
+
+def test_lz4_and_uncompressed_chunks_read_back(tmp_path, run):
+    for compression in ("lz4", "none"):
+        path = tmp_path / f"{compression}.mcap"
+        write_run(path, run, compression=compression, chunk_size=2000)
+        back = read_run(path)
+        np.testing.assert_array_equal(back.log.q, run.log.q)
+
+
+def test_a_chunk_whose_declared_size_is_wrong_is_corrupt(tmp_path, run):
+    path = tmp_path / "run.mcap"
+    write_run(path, run)
+    with path.open("rb") as handle:
+        start = make_reader(handle).get_summary().chunk_indexes[0].chunk_start_offset
+    data = bytearray(path.read_bytes())
+    size = int.from_bytes(data[start + 25:start + 33], "little")
+    data[start + 25:start + 33] = (size + 16).to_bytes(8, "little")  # plausible, but wrong
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogFormatError, match=r"run\.mcap: corrupt chunk"):
+        read_run(path)
+    data[start + 25:start + 33] = (2**40).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogFormatError, match=r"run\.mcap: corrupt chunk \(\d+ compressed bytes "
+                                             r"declare 1099511627776 bytes"):
+        read_run(path)
+
+
+def test_efforts_missing_from_some_messages_are_told_from_nan_efforts(tmp_path, robot):
+    stamps = np.arange(1, 7) * 10**8
+
+    def command(i: int, effort: list[float]) -> tuple:
+        return ("/joint_commands", JOINT_STATE,
+                {"header": {"stamp": {"sec": 0, "nanosec": int(stamps[i])}, "frame_id": ""},
+                 "name": list(NAMES), "position": [], "velocity": [], "effort": effort},
+                int(stamps[i]))
+
+    path = tmp_path / "partial.mcap"
+    write_states(path, stamps, np.zeros((6, 3)),
+                 extra=[command(0, [1.0, 2.0, 3.0]), command(2, [])])
+    with pytest.raises(LogFormatError, match=r"partial\.mcap: command topic '/joint_commands' "
+                                             r"has efforts in some messages or joints only "
+                                             r"\(3 of 6 missing\)"):
+        read_run(path, robot=robot)
+    write_states(path, stamps, np.zeros((6, 3)),
+                 extra=[command(0, [1.0, np.nan, 3.0]), command(2, [1.0, 2.0, 3.0])])
+    with pytest.raises(LogFormatError, match=r"partial\.mcap: command topic '/joint_commands': "
+                                             r"1 NaN commanded torques \(effort; first: joint "
+                                             r"'joint_2' at t = 0\.000000 s\)"):
+        read_run(path, robot=robot)
+
+
+def test_velocities_never_logged_are_differentiated_without_a_warning(tmp_path):
+    import warnings
+
+    path = tmp_path / "pos.mcap"
+    write_states(path, np.arange(1, 6) * 10**8, np.zeros((5, 3)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_joint_log(path)
+
+
+def test_a_log_or_urdf_that_is_not_a_regular_file_is_refused_unopened(tmp_path, run):
+    import os
+
+    fifo = tmp_path / "run.mcap"
+    os.mkfifo(fifo)
+    with pytest.raises(LogFormatError, match=r"run\.mcap: not a regular file"):
+        read_run(fifo)  # opening a FIFO would block
+    from wholearm_tools.errors import RobotModelError
+
+    path = tmp_path / "ok.mcap"
+    write_run(path, run)
+    urdf = tmp_path / "robot.urdf"
+    os.mkfifo(urdf)
+    with pytest.raises(RobotModelError, match=r"robot\.urdf: not a regular file"):
+        read_run(path, robot=urdf)
+
+
+def test_other_formats_are_named_but_their_bytes_never_shown(tmp_path):
+    pdf = tmp_path / "run.mcap"
+    pdf.write_bytes(b"%PDF-1.4\n" + b"secret" * 10)
+    with pytest.raises(LogFormatError, match=r"run\.mcap: not an MCAP file \(it looks like a "
+                                             r"PDF\)") as info:
+        read_run(pdf)
+    assert "secret" not in str(info.value)

@@ -40,6 +40,35 @@ REACH_CELLS_3D = 150
 MAX_POSE_GAP = 100
 #: candidate cells tested per vectorised chunk of poses when rasterising
 _CHUNK_CANDIDATES = 16_000
+#: smallest B as a fraction of the robot's reach: one count of a 20-bit joint encoder seen at
+#: full reach; no log resolves a curvature radius below it
+B_MIN_REACH_FRACTION = 2 * np.pi / 2**20
+#: largest grid built at an explicitly given resolution (int32 cells: 256 MB)
+MAX_GRID_CELLS = 64_000_000
+
+
+def check_B(B: float, robot: RobotModel, *, what: str = "B") -> float:  # noqa: N802
+    """``B`` as a float after checking it lies between the encoder level and the robot's reach.
+
+    Below ``B_MIN_REACH_FRACTION * reach`` no log resolves it (and the swept map's cells would
+    be vanishingly small); above the reach, the robot dilated by B covers more than all the
+    space it can explore.  ``what`` names B in the message (``--B``, or a file's field).
+    """
+    try:
+        value = float(B)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a length in metres, got {B!r}") from None
+    reach = float(robot.reach)
+    floor = B_MIN_REACH_FRACTION * reach
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"{what} must be a positive length in metres, got {value:g}")
+    if value < floor:
+        raise InputError(f"{what} = {value:g} m is below {floor:.2g} m, what the joint encoders "
+                         f"resolve at the robot's reach ({reach:.3g} m)")
+    if value > reach:
+        raise InputError(f"{what} = {value:g} m is larger than the robot's reach ({reach:.3g} m)"
+                         "; B is the smallest curvature radius the arm can explore")
+    return value
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -206,9 +235,14 @@ def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
     resolution : float, optional cell edge [m]
     margin : float, optional padding of the bounding box beyond the swept robot [m]
     """
+    if B is not None:
+        B = check_B(B, robot)
     q = robot.check_q(q)
     if q.ndim != 2:
         raise InputError(f"expected q of shape (N, {robot.dof}), got {q.shape}")
+    if margin is not None and not (np.isfinite(margin) and 0 <= margin <= robot.reach):
+        raise InputError(f"margin must be between 0 and the robot's reach ({robot.reach:.3g} "
+                         f"m), got {margin!r}")
     dim = robot.dim
     pts = robot.joint_positions(q)[..., :dim]
     radii, parts = _robot_parts(robot)
@@ -217,8 +251,13 @@ def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
     lo = pts.reshape(-1, dim).min(axis=0) - rmax - pad
     hi = pts.reshape(-1, dim).max(axis=0) + rmax + pad
     res = float(resolution) if resolution is not None else default_resolution(robot, B, hi - lo)
-    if not res > 0:
-        raise InputError(f"resolution must be > 0, got {resolution}")
+    if not (np.isfinite(res) and res > 0):
+        raise InputError(f"resolution must be a positive length, got {resolution}")
+    cells = float(np.prod(np.ceil((hi - lo) / res) + 1))
+    if cells > MAX_GRID_CELLS:
+        raise InputError(f"a swept map of {res:g} m cells over {np.round(hi - lo, 3).tolist()} m "
+                         f"needs {cells:.3g} cells (at most {MAX_GRID_CELLS:,}); use a coarser "
+                         "resolution")
     cached = _cache_get(q, robot, res, lo, hi)
     if cached is not None:
         return cached

@@ -52,13 +52,13 @@ import contextlib
 import math
 import multiprocessing
 from collections.abc import Callable, Iterator
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from wholearm_tools._parallel import available_cores
+from wholearm_tools._parallel import available_cores, process_pool
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.core import (
     consensus,
@@ -242,7 +242,7 @@ def seed_pool(workers: int | None = None) -> Iterator[Executor | None]:
         return
     methods = multiprocessing.get_all_start_methods()
     ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
-    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+    with process_pool(n, mp_context=ctx) as pool:  # workers ignore Ctrl-C; stopped on error
         yield pool
 
 

@@ -57,10 +57,23 @@ class JointStateColumns:
     effort: NDArray[np.float64]
     fast_messages: int = 0
     """How many messages the vectorised path decoded (the rest went through the stock decoder)."""
+    present: tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]] | None = None
+    """Per field (position, velocity, effort), ``(N, len(names))`` True where the message
+    carried the value (so a NaN there is a NaN in the data, not a missing value); None when
+    every message carried every joint in every field."""
 
     @property
     def n_messages(self) -> int:
         return int(self.stamp_ns.shape[0])
+
+    def carried(self, field: str) -> NDArray[np.bool_]:
+        """``(N, len(names))`` True where the messages carried ``field`` ("position",
+        "velocity" or "effort") for the joint."""
+        k = ("position", "velocity", "effort").index(field)
+        shape = (self.n_messages, len(self.names))
+        if self.present is None:
+            return np.broadcast_to(np.True_, shape)
+        return self.present[k]
 
 
 @dataclass(frozen=True, slots=True)
@@ -219,9 +232,12 @@ class _JointStateAccumulator(TopicDecoder):
         d = self._direct
         if d is not None and self.count == d.count and d.filled.all():
             self._direct = None
+            present = None if all(d.carried) else tuple(
+                np.broadcast_to(np.bool_(c), (d.count, len(d.names))) for c in d.carried)
             return JointStateColumns(d.names, d.stamps, d.log_times,
                                      *(_missing(d.count, len(d.names)) if f is None else f
-                                       for f in d.fields), fast_messages=self.fast)
+                                       for f in d.fields), fast_messages=self.fast,
+                                     present=present)
         if d is not None:  # fewer messages than the summary said
             self.blocks.append(d.block())
             self._direct = None
@@ -232,6 +248,7 @@ class _JointStateAccumulator(TopicDecoder):
         total = self.count
         carried = [any(block[4][k].shape[1] for block in self.blocks) for k in range(3)]
         out = [np.full((total, len(names)), np.nan) if c else None for c in carried]
+        present = [np.zeros((total, len(names)), dtype=bool) for _ in range(3)]
         stamps = np.zeros(total, np.int64)
         log_times = np.zeros(total, np.int64)
         filled = np.zeros(total, dtype=bool)
@@ -243,21 +260,27 @@ class _JointStateAccumulator(TopicDecoder):
             stamps[rows] = stamp
             log_times[rows] = log_time
             filled[rows] = True
-            for target, arr in zip(out, fields, strict=True):
+            for target, arr, mark in zip(out, fields, present, strict=True):
                 if target is None or arr.shape[1] == 0:
                     continue
                 if cols == list(range(len(names))):
                     target[rows] = arr
+                    mark[rows] = True
                 elif isinstance(rows, slice):
                     target[rows, np.asarray(cols)] = arr
+                    mark[rows, np.asarray(cols)] = True
                 else:
                     target[np.ix_(rows, np.asarray(cols))] = arr
+                    mark[np.ix_(rows, np.asarray(cols))] = True
         if not filled.all():  # pragma: no cover - every message lands in exactly one block
             raise self.error("internal error: messages lost while decoding")
         position, velocity, effort = (_missing(total, len(names)) if a is None else a
                                       for a in out)
+        complete = all(bool(m.all()) for m in present)
         return JointStateColumns(tuple(names), stamps, log_times, position, velocity, effort,
-                                 fast_messages=self.fast)
+                                 fast_messages=self.fast,
+                                 present=None if complete else (present[0], present[1],
+                                                                present[2]))
 
 
 def _rows(buf: NDArray[np.uint8], starts: NDArray[np.int64], length: int) -> NDArray[np.uint8]:
@@ -344,6 +367,8 @@ def _json_list(decoder: TopicDecoder, buf: NDArray[np.uint8], starts: NDArray[np
     text = b"[" + b",".join(decoder.payloads(buf, starts, lengths)) + b"]"
     try:
         values = json.loads(text)
+    except RecursionError:
+        raise decoder.error("a JSON message is nested too deeply") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise decoder.error(f"invalid JSON message ({exc})") from None
     if len(values) != starts.shape[0]:  # pragma: no cover - a payload holding "1,2"

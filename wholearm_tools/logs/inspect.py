@@ -12,6 +12,7 @@ from wholearm_tools.errors import LogFormatError, RobotModelError
 from wholearm_tools.logs.bags import scan_log
 from wholearm_tools.logs.decoders import ArrayColumns, JointStateColumns, ValueList
 from wholearm_tools.logs.reader import _select_joint_topic, ground_truth_from_json
+from wholearm_tools.logs.scan import check_log_path
 from wholearm_tools.logs.schemas import (
     COMMAND_TOPIC,
     DESCRIPTION_TOPIC,
@@ -55,6 +56,7 @@ def inspect_log(path: str | os.PathLike[str], *, joint_topic: str | None = None
             return topic == COMMAND_TOPIC
         return True
 
+    check_log_path(path)
     scan = scan_log(path, wanted)
     topics = []
     start = [s.first_log_ns for s in scan.topics.values() if s.first_log_ns is not None]

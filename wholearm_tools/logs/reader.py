@@ -25,22 +25,23 @@ Rules (see ``docs/log-format.md``):
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wholearm_tools.errors import InputError, LogFormatError
+from wholearm_tools.errors import InputError, LogFormatError, RobotModelError
 from wholearm_tools.logs.bags import scan_log
 from wholearm_tools.logs.decoders import ArrayColumns, JointStateColumns, ValueList
 from wholearm_tools.logs.records import TORQUE_SOURCES, GroundTruth, JointLog, Run
-from wholearm_tools.logs.scan import LogScan
+from wholearm_tools.logs.scan import LogScan, check_log_path
 from wholearm_tools.logs.schemas import (
     COMMAND_TOPIC,
     DESCRIPTION_TOPIC,
@@ -82,6 +83,7 @@ def _scan(path: Path, joint_topic: str | None, command_topic: str | None) -> Log
             return topic in (DESCRIPTION_TOPIC, TRUTH_TOPIC)
         return schema == GROUND_TRUTH
 
+    check_log_path(path)
     scan = scan_log(path, wanted)
     if scan.truncated:
         _warn(f"{path}: file is truncated ({scan.truncation}); read the {scan.n_messages} "
@@ -107,6 +109,50 @@ def _select_joint_topic(scan: LogScan, joint_topic: str | None,
         raise LogFormatError(f"{scan.source}: no {JOINT_TOPIC} and several JointState topics "
                              f"{candidates}; choose one with joint_topic (--joint-topic)")
     return candidates[0]
+
+
+#: fewest JointState messages a run can have: contacts are found where joints stop while
+#: torque is applied, which needs a sample before, at and after a stop
+MIN_SAMPLES = 3
+#: a gap between consecutive stamps longer than this many median periods (and than
+#: LONG_GAP_S) is reported: the recording stopped, and no motion is known inside it
+LONG_GAP_PERIODS = 50
+LONG_GAP_S = 1.0
+
+
+def _describe_bad(values: NDArray[np.float64], carried: NDArray[np.bool_]) -> tuple[int, int, str]:
+    """``(missing, non_finite, what)`` counts of the bad cells of ``values``: not carried by
+    their message, or carried but NaN/infinite (``what`` says which: "NaN", "infinite" or
+    "NaN and infinite")."""
+    bad = ~np.isfinite(values)
+    carried = np.asarray(carried, dtype=bool)
+    missing = int(np.count_nonzero(bad & ~carried))
+    data_bad = bad & carried
+    nan = bool(np.any(np.isnan(values[data_bad]))) if data_bad.any() else False
+    inf = bool(np.any(np.isinf(values[data_bad]))) if data_bad.any() else False
+    what = "NaN and infinite" if nan and inf else ("NaN" if nan else "infinite")
+    return missing, int(np.count_nonzero(data_bad)), what
+
+
+def _first_bad(bad: NDArray[np.bool_], names: tuple[str, ...], stamps: NDArray[np.int64]) -> str:
+    row, col = np.argwhere(bad)[0]
+    return f"joint {names[col]!r} at t = {(stamps[row] - stamps[0]) * 1e-9:.6f} s"
+
+
+def _warn_long_gaps(stamps: NDArray[np.int64], source: str, topic: str) -> None:
+    """Warn about gaps in the stamps far longer than the log's own period."""
+    if stamps.shape[0] < 3:
+        return
+    steps = np.diff(stamps).astype(np.float64) * 1e-9
+    limit = max(LONG_GAP_S, LONG_GAP_PERIODS * float(np.median(steps)))
+    long = np.flatnonzero(steps > limit)
+    if long.shape[0] == 0:
+        return
+    worst = int(long[np.argmax(steps[long])])
+    t_at = (stamps[worst] - stamps[0]) * 1e-9
+    _warn(f"{source}: topic {topic!r}: {long.shape[0]} gap(s) in the stamps longer than "
+          f"{limit:.3g} s, the longest {steps[worst]:.3g} s after t = {t_at:.3f} s (no joint "
+          "motion is known inside a gap)")
 
 
 def _times(stamp_ns: NDArray[np.int64], log_time_ns: NDArray[np.int64], source: str,
@@ -201,9 +247,17 @@ def _commands(scan: LogScan, topic: str, explicit: bool, names: tuple[str, ...],
     effort = _take(decoded.effort, keep, cols)
     if np.all(np.isfinite(effort)):
         tau = _hold(t_cmd, effort, t_state, np.zeros_like(q))
-    elif np.any(np.isfinite(effort)):
-        raise LogFormatError(f"{source}: command topic {topic!r} has efforts in some messages "
-                             "or joints only")
+    else:
+        carried = _take(decoded.carried("effort"), keep, cols)
+        missing, non_finite, what = _describe_bad(effort, carried)
+        if non_finite:
+            raise LogFormatError(
+                f"{source}: command topic {topic!r}: {non_finite} {what} commanded torques "
+                f"(effort; first: {_first_bad(carried & ~np.isfinite(effort), names, t_cmd)})")
+        if missing < effort.size:
+            raise LogFormatError(f"{source}: command topic {topic!r} has efforts in some "
+                                 f"messages or joints only ({missing} of {effort.size} "
+                                 "missing)")
     position = _take(decoded.position, keep, cols)
     if np.all(np.isfinite(position)):
         q_cmd = _hold(t_cmd, position, t_state, q)
@@ -260,6 +314,13 @@ def _torque_evidence(scan: LogScan, topic: str, state: JointStateColumns,
         scan, cmd_topic, command_topic is not None, names, stamps, q)
     if effort == "measured":
         measured = _take(state.effort, keep, cols)
+        if not np.all(np.isfinite(measured)):
+            carried = _take(state.carried("effort"), keep, cols)
+            _, non_finite, what = _describe_bad(measured, carried)
+            if non_finite:
+                raise LogFormatError(
+                    f"{source}: topic {topic!r}: {non_finite} {what} measured efforts (first: "
+                    f"{_first_bad(carried & ~np.isfinite(measured), names, stamps)})")
         missing = [n for n, ok in zip(names, np.all(np.isfinite(measured), axis=0), strict=True)
                    if not ok]
         if missing:
@@ -309,19 +370,38 @@ def _joint_log(scan: LogScan, topic: str, names: tuple[str, ...] | None,
     times = _times(cols_data.stamp_ns, cols_data.log_time_ns, source, topic)
     keep = _order(times, source, topic)
     stamps = times[keep]
+    if stamps.shape[0] < MIN_SAMPLES:
+        raise LogFormatError(f"{source}: topic {topic!r} has {stamps.shape[0]} sample(s) at "
+                             f"distinct stamps; a run needs at least {MIN_SAMPLES}")
     q = _take(cols_data.position, keep, cols)
     bad = ~np.isfinite(q)
     if bad.any():
-        row, col = np.argwhere(bad)[0]
+        carried = _take(cols_data.carried("position"), keep, cols)
+        missing, non_finite, what = _describe_bad(q, carried)
+        if non_finite:
+            raise LogFormatError(
+                f"{source}: topic {topic!r}: {non_finite} {what} positions (first: "
+                f"{_first_bad(carried & bad, names, stamps)})")
         raise LogFormatError(
-            f"{source}: topic {topic!r}: {int(bad.sum())} NaN or missing positions (first: "
-            f"joint {names[col]!r} at t = {(stamps[row] - stamps[0]) * 1e-9:.6f} s)")
+            f"{source}: topic {topic!r}: {missing} missing positions (first: "
+            f"{_first_bad(bad, names, stamps)})")
+    _warn_long_gaps(stamps, source, topic)
     t = (stamps - stamps[0]).astype(np.float64) * 1e-9
     qd = _take(cols_data.velocity, keep, cols)
     if not np.all(np.isfinite(qd)):
-        log.info("%s: topic %r has no complete velocities; differentiating positions",
-                 source, topic)
-        qd = np.gradient(q, t, axis=0) if t.shape[0] > 1 else np.zeros_like(q)
+        carried = _take(cols_data.carried("velocity"), keep, cols)
+        missing, non_finite, what = _describe_bad(qd, carried)
+        if missing == qd.size:  # no velocities logged: the usual case, nothing lost
+            log.info("%s: topic %r has no velocities; differentiating positions", source,
+                     topic)
+        else:
+            first = _first_bad(~np.isfinite(qd), names, stamps)
+            reason = (f"{non_finite} {what}" if non_finite else "") + \
+                (" and " if non_finite and missing else "") + \
+                (f"{missing} missing" if missing else "")
+            _warn(f"{source}: topic {topic!r}: {reason} velocities of {qd.size} (first: "
+                  f"{first}); every logged velocity is replaced by differentiated positions")
+        qd = np.gradient(q, t, axis=0)
     tau_cmd, q_cmd, torque_source, note = _torque_evidence(
         scan, topic, cols_data, keep, cols, names, stamps, q, command_topic, effort, stiffness,
         require_commands)
@@ -431,15 +511,34 @@ def _robot(scan: LogScan, robot: RobotModel | str | os.PathLike[str] | None,
                              "RobotModel")
         return robot, {n: "not in the robot" for n in log_joints if n not in robot.joint_names}
     if robot is not None:
-        found = load_urdf_chain(robot, joints=log_joints, **chain)
+        from wholearm_tools._io import check_input_file
+        from wholearm_tools.robot.urdf import MAX_URDF_BYTES
+
+        # a bounded regular file before the URDF reader opens it (a FIFO would block it)
+        check_input_file(robot, "URDF", max_bytes=MAX_URDF_BYTES, error=RobotModelError)
+        source = str(robot)
+        with _errors_named(source):
+            found = load_urdf_chain(robot, joints=log_joints, **chain)
     else:
         description = scan.decoded.get(DESCRIPTION_TOPIC)
         if not isinstance(description, ValueList) or not description.values:
             raise LogFormatError(f"{scan.source}: no URDF on {DESCRIPTION_TOPIC} and no robot "
                                  "given (pass robot=RobotModel or a URDF path, or --robot)")
-        found = urdf_chain(description.values[0], f"{scan.source} {DESCRIPTION_TOPIC}",
-                           joints=log_joints, **chain)
+        source = f"{scan.source} {DESCRIPTION_TOPIC}"
+        with _errors_named(source):
+            found = urdf_chain(description.values[0], source, joints=log_joints, **chain)
     return found.robot, found.ignored_log_joints(log_joints)
+
+
+@contextlib.contextmanager
+def _errors_named(source: str) -> Iterator[None]:
+    """Robot errors raised within name ``source`` (the URDF file, or the log and topic)."""
+    try:
+        yield
+    except RobotModelError as exc:
+        if str(exc).startswith(source):
+            raise
+        raise RobotModelError(f"{source}: {exc}") from None
 
 
 LIMIT_SLACK = 0.05

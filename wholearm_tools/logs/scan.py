@@ -65,17 +65,45 @@ class LogScan:
         return sum(t.count for t in self.topics.values())
 
 
+#: what a file that is not MCAP looks like, by its first bytes (named in the error, so the
+#: file's own bytes are never shown)
+_OTHER_FORMATS = ((b"SQLite format 3\x00", "an SQLite database (a rosbag2 .db3?)"),
+                  (b"#ROSBAG", "a ROS 1 bag"), (b"PK\x03\x04", "a zip archive"),
+                  (b"\x1f\x8b", "a gzip file"), (b"\x28\xb5\x2f\xfd", "a zstd stream"),
+                  (b"%PDF", "a PDF"), (b"PAR1", "a Parquet file"), (b"<", "XML or HTML text"),
+                  (b"{", "JSON text"))
+
+
+def check_log_path(path: str | Path) -> None:
+    """LogFormatError unless ``path`` is a folder (a rosbag2 recording) or a regular file: a
+    device node or a FIFO is refused before anything opens it (opening a FIFO blocks until a
+    writer appears; a device is read forever)."""
+    from wholearm_tools._io import check_input_file
+
+    if not Path(path).is_dir():
+        check_input_file(path, "log", error=LogFormatError)
+
+
 def check_magic(path: Path) -> None:
-    """LogFormatError unless ``path`` starts with the MCAP magic bytes."""
+    """LogFormatError unless ``path`` is a regular file starting with the MCAP magic bytes.
+
+    A device node or a FIFO is refused before it is opened (it would be read forever).  The
+    message names a few other formats by their signature but never shows the file's bytes.
+    """
+    from wholearm_tools._io import check_input_file
+
+    check_input_file(path, "log", error=LogFormatError)
     try:
         with path.open("rb") as handle:
-            head = handle.read(len(MCAP_MAGIC))
+            head = handle.read(16)
     except OSError as exc:
         raise LogFormatError(f"{path}: cannot read log ({exc.strerror})") from None
     if not head:
         raise LogFormatError(f"{path}: empty file, not an MCAP log")
-    if head != MCAP_MAGIC:
-        raise LogFormatError(f"{path}: not an MCAP file (starts with {head[:8]!r})")
+    if head[:len(MCAP_MAGIC)] != MCAP_MAGIC:
+        kind = next((name for sig, name in _OTHER_FORMATS if head.startswith(sig)), None)
+        raise LogFormatError(f"{path}: not an MCAP file" + (f" (it looks like {kind})"
+                                                            if kind else " (no MCAP magic)"))
 
 
 class _Scanner:
@@ -208,19 +236,53 @@ def _periodic_messages(buf: NDArray[np.uint8], start: int, max_period: int = 4
     return None
 
 
+#: largest decompressed chunk accepted [bytes] (writers use 1-4 MiB chunks)
+MAX_CHUNK_BYTES = 1 << 30
+#: largest ratio of a chunk's declared decompressed size to its compressed length; zstd and
+#: lz4 reach a few hundred on the most repetitive real logs
+MAX_CHUNK_RATIO = 1000
+#: below this declared size [bytes] the ratio is not checked (tiny chunks of repeated bytes)
+_RATIO_FREE_BYTES = 1 << 20
+
+
 def _decompress(chunk: Any, source: str) -> bytes:
+    """The chunk's records, decompressed after checking its declared size against its own
+    compressed length (a few KiB declaring hundreds of MiB is refused before any work) and
+    checked to be exactly that size afterwards."""
+    size = int(chunk.uncompressed_size)
+    stored = len(chunk.data)
+    if chunk.compression == "":
+        if stored != size:
+            raise LogFormatError(f"{source}: corrupt chunk (holds {stored} bytes, declares "
+                                 f"{size})")
+        return chunk.data
+    if size > MAX_CHUNK_BYTES or (size > _RATIO_FREE_BYTES
+                                  and size > MAX_CHUNK_RATIO * max(stored, 1)):
+        raise LogFormatError(f"{source}: corrupt chunk ({stored} compressed bytes declare "
+                             f"{size} bytes; at most {MAX_CHUNK_RATIO} times the compressed "
+                             f"size and {MAX_CHUNK_BYTES >> 20} MiB)")
     if chunk.compression == "zstd":
         import zstandard
 
-        return zstandard.ZstdDecompressor().decompress(chunk.data,
-                                                       max_output_size=chunk.uncompressed_size)
-    if chunk.compression == "lz4":
+        declared = zstandard.frame_content_size(chunk.data)  # -1 when the frame omits it
+        if declared not in (-1, size):
+            raise LogFormatError(f"{source}: corrupt chunk (its zstd frame holds {declared} "
+                                 f"bytes, the chunk declares {size})")
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=size)
+    elif chunk.compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(chunk.data)
-    if chunk.compression == "":
-        return chunk.data
-    raise LogFormatError(f"{source}: unsupported chunk compression {chunk.compression!r}")
+        decompressor = lz4.frame.LZ4FrameDecompressor()
+        data = decompressor.decompress(chunk.data, max_length=size)
+        if not decompressor.eof:
+            raise LogFormatError(f"{source}: corrupt chunk (decompresses to more than the "
+                                 f"{size} bytes it declares)")
+    else:
+        raise LogFormatError(f"{source}: unsupported chunk compression {chunk.compression!r}")
+    if len(data) != size:
+        raise LogFormatError(f"{source}: corrupt chunk (decompresses to {len(data)} bytes, "
+                             f"declares {size})")
+    return data
 
 
 _SKIP = {0x07, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F}
