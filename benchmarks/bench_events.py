@@ -93,7 +93,8 @@ def score(run, B: float) -> dict:
     right = decided & ((lab == "tip") == true_tip)
     return {"events": truth.n_contacts, "stop": int(stopped.sum()), "det": len(contacts),
             "found": int((hit & stopped).sum()), "paired": int(ok.sum()),
-            "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()), "decided": int(decided.sum()),
+            "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()),
+            "decided": int(decided.sum()),
             "right": int(right.sum()), "amb": int((link_ok & (lab == "ambiguous")).sum()),
             "missed": [(round(float(truth.contact_t[j]), 3), int(truth.contact_link[j]),
                         str(truth.contact_kind[j])) for j in np.flatnonzero(stopped & ~hit)],
@@ -157,7 +158,8 @@ def main() -> None:
         print(line(name, "all", [r for r in rows if r["scenario"] == name]))
     print(line("all", "all", rows))
     cols = {"recall": ("found", "stop"), "prec": ("paired", "det"),
-            "link": ("link_ok", "paired"), "group": ("in_group", "paired"), "lab": ("right", "decided"), "amb": ("amb", "link_ok")}
+            "link": ("link_ok", "paired"), "group": ("in_group", "paired"),
+            "lab": ("right", "decided"), "amb": ("amb", "link_ok")}
     spread = []
     for c, (a, b) in cols.items():
         v = [rate(r[a], r[b]) for r in rows if r[b]]

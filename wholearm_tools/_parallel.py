@@ -12,10 +12,11 @@ the main process alone reports, once.
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
 import signal
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
 
 #: seconds to wait for a terminated worker before killing it
@@ -99,3 +100,31 @@ def process_pool(max_workers: int, *, mp_context: Any = None,
         _stop(pool)
         raise
     pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int | None = None) -> Iterator[Executor | None]:
+    """A pool for independent fits, shut down on exit; ``None`` (work in this process) for one
+    worker or inside a daemonic process (a Dask or multiprocessing worker, which may not start
+    children).
+
+    ``workers`` None: every core this process may use, at most 8, or one in a process that is
+    itself a worker of a pool (``wholearm compare`` runs one reconstruction per core already).
+    Workers are forked where the platform can (they start in milliseconds, with the CasADi
+    solvers already built), else spawned."""
+    from wholearm_tools.errors import InputError
+
+    if workers is None:
+        nested = multiprocessing.parent_process() is not None
+        n = 1 if nested else min(available_cores(), 8)
+    else:
+        n = int(workers)
+    if n < 1:
+        raise InputError(f"workers must be at least 1, got {workers!r}")
+    if n == 1 or multiprocessing.current_process().daemon:
+        yield None
+        return
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
+    with process_pool(n, mp_context=ctx) as pool:
+        yield pool

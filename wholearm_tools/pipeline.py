@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools._parallel import worker_pool
 from wholearm_tools.contact_table import ContactTable
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import Run
@@ -264,7 +265,6 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.fit.policy import FitPolicy
     from wholearm_tools.fit.readings import readings_from_contacts
-    from wholearm_tools.fit.segment import seed_pool
     from wholearm_tools.mesh import support_extent
 
     policy = policy or FitPolicy(noise=noise)
@@ -308,7 +308,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                         f"at least {need} needed (a {kinds[0]} has {MODELS[kinds[0]].dof} "
                         "parameters and must explain more contacts than that)")
     free_points = _with_contact_hints(table, free_points)
-    with seed_pool(workers) as pool:
+    with worker_pool(workers) as pool:
         inf = infer(rd, kinds=kinds, policy=policy, B=float(B), noise_floor=noise_floor,
                     swept=swept, base=base, free_points=free_points, reach=reach,
                     executor=pool)

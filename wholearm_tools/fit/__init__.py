@@ -1,26 +1,37 @@
-"""Surface reconstruction: primitive fits from tip and link contacts, and fit-and-grow.
+"""Surface reconstruction: primitive fits from tip and link contacts, and the inference loop.
 
 Public API
 ----------
 :class:`FitData`          the contacts to fit (columnar: tips, links, free-space hints)
-:func:`fit_primitive`     one primitive of a given type, CasADi/IPOPT -> :class:`FitResult`
+:func:`fit_primitive`     one primitive of a given type -> :class:`FitResult`
 :func:`residuals`, :func:`cost`   the fitted quantity for given parameters
-:func:`segment`           fit-and-grow segmentation -> :class:`Segmentation`
+:func:`readings_from_contacts`   contacts as mixtures of readings -> :class:`Readings`
+:func:`infer`             hypotheses, one score, selection -> :class:`Inference`
+:func:`report_gate`       covariance under a kinematic error model -> :class:`GateResult`
+:class:`FitPolicy`        every parameter of the loop in one frozen record
 """
 
 from wholearm_tools.fit.core import LOSSES, cost, fit_primitive, residuals
 from wholearm_tools.fit.data import FitData, weight_from_tip_probability
+from wholearm_tools.fit.gate import GateResult, report_gate
+from wholearm_tools.fit.infer import Inference, infer
+from wholearm_tools.fit.policy import FitPolicy
+from wholearm_tools.fit.readings import Readings, readings_from_contacts
 from wholearm_tools.fit.result import FitResult
-from wholearm_tools.fit.segment import Segmentation, segment
 
 __all__ = [
     "LOSSES",
     "FitData",
+    "FitPolicy",
     "FitResult",
-    "Segmentation",
+    "GateResult",
+    "Inference",
+    "Readings",
     "cost",
     "fit_primitive",
+    "infer",
+    "readings_from_contacts",
+    "report_gate",
     "residuals",
-    "segment",
     "weight_from_tip_probability",
 ]
