@@ -1,0 +1,128 @@
+"""The inference loop on built contacts: which primitives it selects, how it reads each contact
+(tip sphere or link side: the E-step), what it leaves unexplained, and the report gate."""
+
+import numpy as np
+import pytest
+from fit_synth import contacts, param_error, planar_scene
+
+from wholearm_tools.fit import FitData, FitPolicy, infer, readings_from_contacts, report_gate
+from wholearm_tools.fit.core import fit_primitive
+
+
+def _readings(d: FitData, p_tip_tips: float = 0.9, p_tip_links: float = 0.1,
+              extra: np.ndarray | None = None):
+    """Each tip contact read as its sphere or as the side of a link reaching it from free
+    space; each link contact as its side or the sphere at its outer end (the synthetic links
+    that touch with an end point touch with their first, which is taken as the outer end, as
+    on an arm); ``extra`` (K, dim) outlying tip contacts.  Returns the readings and each
+    contact's true kind (True: tip)."""
+    hint = d.free_points[0]
+    tips = d.tip_points if extra is None else np.vstack([d.tip_points, extra])
+    u = hint - tips
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    nt, nl = len(tips), d.n_link
+    centre = np.vstack([tips, d.link_a])
+    radius = np.r_[np.full(nt, d.tip_radius[0]), d.link_radius]
+    seg_a = np.vstack([tips + 0.2 * u, d.link_b])
+    seg_b = np.vstack([tips, d.link_a])
+    p_tip = np.r_[np.full(nt, p_tip_tips), np.full(nl, p_tip_links)]
+    rd = readings_from_contacts(np.zeros(nt + nl, int), p_tip, centre, radius, seg_a, seg_b,
+                                radius)
+    return rd, np.r_[np.ones(nt, bool), np.zeros(nl, bool)]
+
+
+def test_planar_scene_selects_two_lines_and_a_circle_and_nothing_else():
+    data, prims, label = planar_scene(np.random.default_rng(3), noise=2e-4)
+    outliers = np.array([[0.4, 0.2], [0.6, -0.2], [-0.6, -0.2]])
+    rd, _ = _readings(data, extra=outliers)
+    inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4,
+                free_points=data.free_points, rng=0)
+    kinds = sorted(h.kind for h in inf.selected)
+    assert kinds == ["circle", "line", "line"]
+    circle = next(h for h in inf.selected if h.kind == "circle")
+    assert abs(float(circle.fit.params["radius"]) - 0.25) < 0.01 * 0.25
+    assert param_error("circle", circle.fit.params, prims[2][1]) < 2e-3
+    # the outliers (the last tips) are left unexplained; nearly every true contact is explained
+    n_t = data.n_tip
+    assert np.all(inf.assignment[n_t:n_t + len(outliers)] == -1)
+    true_rows = np.r_[np.arange(n_t), np.arange(n_t + len(outliers), rd.n_contacts)]
+    assert np.mean(inf.assignment[true_rows] >= 0) > 0.9
+
+
+def test_undecided_link_contacts_are_read_as_link_sides_by_the_fit():
+    """Eq. (2) left the link contacts at P_T = 0.5: the fit's E-step reads the tangent ones
+    as sides (their outer-end spheres lie off the circle)."""
+    p = {"center": np.array([0.0, 0.0]), "radius": 0.2}
+    d = contacts("circle", p, 16, 16, 1, np.random.default_rng(1), noise=1e-4)
+    rd, is_tip = _readings(d, p_tip_tips=0.9, p_tip_links=0.5)
+    inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4,
+                free_points=d.free_points, rng=0)
+    assert [h.kind for h in inf.selected] == ["circle"]
+    side = ~rd.sphere
+    link_contacts = np.flatnonzero(~is_tip & (inf.assignment >= 0))
+    assert len(link_contacts) >= 14
+    post_side = np.array([inf.posterior[side & (rd.contact == c)][0] for c in link_contacts])
+    assert np.mean(post_side > 0.9) >= 0.9
+
+
+def test_two_bores_at_a_junction_are_two_cylinders():
+    main = {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]), "radius": 0.16}
+    lat = {"point": np.zeros(3), "axis": np.array([np.sqrt(0.5), 0.0, np.sqrt(0.5)]),
+           "radius": 0.11}
+    rng = np.random.default_rng(5)
+    parts = []
+    for p, other, sign in ((main, lat, 1), (lat, main, -1)):
+        d = contacts("cylinder", p, 40, 0, -1, rng, noise=2e-4)
+        q = d.tip_points - other["point"]
+        h = q @ other["axis"]
+        r = np.linalg.norm(q - h[:, None] * other["axis"], axis=1)
+        # the main bore's wall outside the lateral's window; the lateral's beyond the main
+        keep = ((~((r < other["radius"] + 0.03) & (h > 0)) & (np.abs(d.tip_points[:, 2]) < 0.45))
+                if sign > 0 else (r > other["radius"] + 0.03) & ((d.tip_points @ p["axis"]) > 0))
+        parts.append(d.tip_points[keep])
+    pts = np.vstack(parts)
+    rd = readings_from_contacts(np.zeros(len(pts), int), np.full(len(pts), 0.95), pts,
+                                np.full(len(pts), 0.02), pts, pts, np.full(len(pts), 0.02))
+    inf = infer(rd, kinds=("plane", "sphere", "cylinder"), B=0.02, noise_floor=1e-4, rng=0)
+    kinds = sorted(h.kind for h in inf.selected)
+    assert kinds == ["cylinder", "cylinder"]
+    radii = sorted(float(h.fit.params["radius"]) for h in inf.selected)
+    assert radii[0] == pytest.approx(0.11, rel=0.02)
+    assert radii[1] == pytest.approx(0.16, rel=0.02)
+    a, b = (np.asarray(h.fit.params["axis"], dtype=float) for h in inf.selected)
+    assert abs(np.degrees(np.arccos(min(1.0, abs(float(a @ b))))) - 45.0) < 1.0
+
+
+def test_too_few_contacts_give_an_empty_map():
+    d = contacts("circle", {"center": np.zeros(2), "radius": 0.2}, 3, 0, 1,
+                 np.random.default_rng(0))
+    rd, _ = _readings(d)
+    inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4, rng=0)
+    assert inf.selected == ()
+    assert np.all(inf.assignment == -1)
+
+
+def test_the_result_does_not_depend_on_the_rng_stream_of_a_second_call():
+    data, _, _ = planar_scene(np.random.default_rng(4), noise=2e-4)
+    rd, _ = _readings(data)
+    a = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4, rng=7)
+    b = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4, rng=7)
+    assert np.array_equal(a.assignment, b.assignment)
+    assert a.score == b.score
+
+
+def test_report_gate_passes_a_well_spread_circle_and_stops_a_pinned_one():
+    p = {"center": np.array([0.0, 0.0]), "radius": 0.2}
+    rng = np.random.default_rng(2)
+    spread = contacts("circle", p, 20, 0, 1, rng, noise=1e-4)
+    fit = fit_primitive("circle", spread)
+    assert report_gate(fit, spread, sigma_kin=5e-4, max_rel_std=FitPolicy().max_rel_std)
+    # all but one contact on a 2-degree arc: the radius rests on the one far contact
+    ang = np.r_[np.linspace(0.0, np.radians(2.0), 12), np.pi / 2]
+    tips = np.c_[np.cos(ang), np.sin(ang)] * (0.2 + 0.02)
+    pinned = FitData.create(tips, 0.02, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), 0.02, 1.0,
+                            free_points=np.zeros((1, 2)) + 0.5, dim=2)
+    g = report_gate(fit_primitive("circle", pinned), pinned, sigma_kin=5e-4,
+                    max_rel_std=FitPolicy().max_rel_std)
+    assert not g
+    assert g.pivot == len(ang) - 1 or g.worst_std > FitPolicy().max_rel_std
