@@ -63,8 +63,8 @@ RADII = {"circle": ("radius",), "sphere": ("radius",), "cylinder": ("radius",),
          "torus": ("minor_radius", "major_radius")}
 #: closed types: free space inside means the robot, base included, is inside
 CLOSED = ("circle", "sphere")
-#: a side reading touching within this fraction of the link's length from its inner end
-_INNER_END = 1e-6
+#: a side reading touching within this fraction of the link's length from one of its ends
+_END = 1e-6
 #: candidate types per dimension, fewest parameters first
 DEFAULT_KINDS = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
 
@@ -220,16 +220,17 @@ class Scorer:
     # ---- per hypothesis
     def residuals(self, h: Hypothesis) -> FloatArray:
         """Residual of every reading under ``h``; infinite for a side reading whose least
-        clearance lies at the link's inner end.  That point is the joint the link turns about:
-        it does not move when the link turns, so a contact there would have stopped the inner
-        link, and the joint signals would have named it (the link in contact is the last one
-        to stop)."""
+        clearance lies at one of the link's ends.  The inner end is the joint the link turns
+        about: it does not move when the link turns, so a contact there would have stopped the
+        inner link, and the joint signals would have named it (the link in contact is the last
+        one to stop).  At the outer end the link's sphere (tip or joint sphere, never thinner
+        than the link) encloses the capsule's cap: a contact there is the sphere reading, and
+        the side read at the sphere's point would put the surface off by the difference of
+        the two radii."""
         if h.res is None:
             r, t = residuals_and_touch(h.kind, h.fit.params, self.all_data, h.fit.free_side)
-            n_tip = self.all_data.n_tip
-            r = r.copy()
-            r[n_tip:][t <= _INNER_END] = np.inf
-            h.res = self.readings.from_fit_rows(r)
+            h.res = self.readings.from_fit_rows(_sides_at_ends_invalid(r, t,
+                                                                       self.all_data.n_tip))
         return h.res
 
     def score(self, h: Hypothesis) -> Hypothesis:
@@ -587,10 +588,21 @@ def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
                                                   ctx.max_radius_ratio) else None
 
 
+def _sides_at_ends_invalid(r: FloatArray, t: FloatArray, n_tip: int) -> FloatArray:
+    """Residuals ``r`` of fit rows (spheres first, then ``len(t)`` sides touching at fraction
+    ``t`` of their length) with the sides that touch at an end set infinite (see
+    :meth:`Scorer.residuals`)."""
+    r = np.array(r, dtype=float)
+    r[n_tip:][(t <= _END) | (t >= 1.0 - _END)] = np.inf
+    return r
+
+
 def _residuals_of(f: FitResult, rd: Readings, rows: IntArray) -> FloatArray:
-    """Residuals [m] of readings ``rows`` under fit ``f`` (in the order of ``rows``)."""
-    r = residuals_and_touch(f.kind, f.params, rd.fit_data(rows), f.free_side)[0]
-    return r[Readings.fit_order(rd.sphere[rows])]
+    """Residuals [m] of readings ``rows`` under fit ``f`` (in the order of ``rows``), infinite
+    for a side read where it cannot touch (:meth:`Scorer.residuals`)."""
+    data = rd.fit_data(rows)
+    r, t = residuals_and_touch(f.kind, f.params, data, f.free_side)
+    return _sides_at_ends_invalid(r, t, data.n_tip)[Readings.fit_order(rd.sphere[rows])]
 
 
 def _plain(ctx: _Context, anchor: int) -> float:
