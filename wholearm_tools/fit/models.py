@@ -362,12 +362,14 @@ def _axis_candidates(ctx: InitContext) -> list[FloatArray]:
 
 
 def _cyl_from_axis(ctx: InitContext, axis: FloatArray) -> FloatArray:
-    """Raw cylinder about ``axis`` from :func:`_projected_fit`."""
-    _, cx, cy, r = _projected_fit(ctx, axis[None])
     u, v = _perp_basis(axis)
-    p = float(cx[0]) * u + float(cy[0]) * v
+    surf = ctx.surface_points
+    uv = np.stack([surf @ u, surf @ v], axis=1)
+    c2, r = kasa(uv)
+    p = c2[0] * u + c2[1] * v
     p = p - (p @ axis) * axis
-    return np.concatenate([p, axis, [max(float(r[0]), 10 * _R_MIN)]])
+    r_surf = max(r - ctx.side * float(np.mean(ctx.offsets)), 10 * _R_MIN)
+    return np.concatenate([p, axis, [r_surf]])
 
 
 def _hemisphere(n: int) -> FloatArray:
@@ -384,15 +386,17 @@ _DIRECTIONS = _hemisphere(400)
 
 def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0,
                quick: bool = False) -> list[FloatArray]:
-    """Best cylinder axes by direction sampling: for each of 400 directions, the circle fit of
-    the contacts projected on the perpendicular plane (:func:`_projected_fit`: tips as
-    points, links as segments), scored by the geometric residual; the best ``keep`` mutually
-    distinct directions, refined locally.  Robust to partial arcs and to links touching away
-    from their middle, where local normals and PCA fail, and cheap (vectorised numpy)."""
-    if ctx.tip.shape[0] + ctx.a.shape[0] < 5:
+    """Best cylinder axes by direction sampling: for each of 400 directions, the algebraic
+    circle fit of the surface samples projected on the perpendicular plane, with the contact
+    radii as offsets (``rho_i = r + side * w_i``), scored by the geometric residual; the best
+    ``keep`` mutually distinct directions.  Robust to partial arcs where local normals and PCA
+    fail, and cheap (vectorised numpy, no solver)."""
+    X = ctx.surface_points
+    off = ctx.offsets
+    if len(X) < 5:
         return []
     A = _DIRECTIONS
-    score = _projected_fit(ctx, A)[0]
+    score = _axis_score(X, off, ctx.side, A)
     out: list[FloatArray] = []
     cos_min = np.cos(np.radians(min_angle_deg))
     for k in np.argsort(score):
@@ -401,8 +405,9 @@ def _scan_axes(ctx: InitContext, keep: int = 3, min_angle_deg: float = 15.0,
         if all(abs(float(A[k] @ a)) < cos_min for a in out):
             out.append(A[k])
     if quick:  # RANSAC hypotheses: a coarser refinement is plenty for an inlier test
-        return [_refine_axis(ctx, a, (0.06, 0.02, 0.007), _LOCAL[:40]) for a in out]
-    return [_refine_axis(ctx, a) for a in out]
+        return [_refine_axis(X, off, ctx.side, a, (0.06, 0.02, 0.007), _LOCAL[:40])
+                for a in out]
+    return [_refine_axis(X, off, ctx.side, a) for a in out]
 
 
 def perp_bases(A: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -421,69 +426,39 @@ def perp_bases(A: FloatArray) -> tuple[FloatArray, FloatArray]:
     return U, V
 
 
-def _projected_fit(ctx: InitContext, A: FloatArray, iters: int = 3
-                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The cylinder about each axis direction (rows of ``A (K, 3)``), as a circle in the plane
-    normal to it: ``(score, cx, cy, r)`` per direction, ``(K,)`` each.
-
-    The distance of a point from a line parallel to the axis is the planar distance of their
-    projections, so about a fixed direction a cylinder is a circle: tips project to points,
-    links to segments.  A link touches where its projected segment comes closest to the centre
-    (free space outside; inside a bore, at its end farther from it): the algebraic (Kasa) fit
-    of the tips and of those link points, alternated with the link points' update ``iters``
-    times from the segments' midpoints.  ``r`` is the surface radius (contact centres lie at
-    ``r + side w``); ``score`` the sum of squared geometric residuals (inf where the fit fails).
-    """
+def _axis_score(X: FloatArray, off: FloatArray, side: float, A: FloatArray) -> FloatArray:
+    """Geometric residual sum of squares of the offset circle fit, with the contact radii as
+    offsets (``rho_i = r + side * w_i``), for each axis row of ``A``: the Kasa fit
+    ``[2x 2y 1] [cx cy c]^T = x^2 + y^2`` of ``X`` projected on the plane normal to it."""
     U, V = perp_bases(A)
-    side = ctx.side
-    w = ctx.offsets[:, None]
-    tx, ty = ctx.tip @ U.T, ctx.tip @ V.T  # (Nt, K)
-    ax, ay = ctx.a @ U.T, ctx.a @ V.T      # (Nl, K)
-    dx, dy = ctx.b @ U.T - ax, ctx.b @ V.T - ay
-    off = w
-    sx, sy = ax + 0.5 * dx, ay + 0.5 * dy
-    for it in range(iters + 1):
-        x = np.vstack([tx, sx])
-        y = np.vstack([ty, sy])
-        # offset Kasa (see kasa_offset): x^2 + y^2 - w^2 = 2 cx x + 2 cy y + c0 + 2 side R w
-        M = np.stack([2 * x, 2 * y, np.ones_like(x), np.broadcast_to(2 * side * w, x.shape)],
-                     axis=2)
-        MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(4)
-        Mty = np.einsum("nki,nk->ki", M, x * x + y * y - w * w)
-        sol = np.linalg.solve(MtM, Mty[..., None])[..., 0]
-        cx, cy = sol[:, 0], sol[:, 1]
-        if it == iters or len(ctx.a) == 0:
-            break
-        if side > 0:
-            L2 = np.maximum(dx * dx + dy * dy, 1e-30)
-            t = np.clip(((cx - ax) * dx + (cy - ay) * dy) / L2, 0.0, 1.0)
-        else:
-            da = (ax - cx) ** 2 + (ay - cy) ** 2
-            db = (ax + dx - cx) ** 2 + (ay + dy - cy) ** 2
-            t = np.where(da >= db, 0.0, 1.0)
-        sx, sy = ax + t * dx, ay + t * dy
-    rho = np.sqrt((x - cx) ** 2 + (y - cy) ** 2)
-    r = np.mean(rho - side * off, axis=0)
-    res = rho - side * off - r
+    x = X @ U.T
+    y = X @ V.T
+    M = np.stack([2 * x, 2 * y, np.ones_like(x)], axis=2)
+    MtM = np.einsum("nki,nkj->kij", M, M) + 1e-12 * np.eye(3)
+    Mty = np.einsum("nki,nk->ki", M, x * x + y * y)
+    sol = np.linalg.solve(MtM, Mty[..., None])[..., 0]
+    rho = np.sqrt((x - sol[:, 0]) ** 2 + (y - sol[:, 1]) ** 2)
+    r = np.mean(rho - side * off[:, None], axis=0)
+    res = rho - side * off[:, None] - r
     score = np.sum(res * res, axis=0)
     score[~np.isfinite(score) | (r <= 0)] = np.inf
-    return score, cx, cy, r
+    return score
 
 
 _LOCAL = np.random.default_rng(0).standard_normal((120, 3))
 
 
-def _refine_axis(ctx: InitContext, axis: FloatArray,
+def _refine_axis(X: FloatArray, off: FloatArray, side: float, axis: FloatArray,
                  steps: tuple[float, ...] = (0.06, 0.02, 0.007, 0.0025, 0.0008),
                  local: FloatArray = _LOCAL) -> FloatArray:
     """Local refinement of a sampled axis: shrinking random perturbations (the 400-direction
     lattice is ~5 degrees apart, too coarse for a seed's inlier test)."""
     best = axis
-    best_s = float(_projected_fit(ctx, best[None])[0][0])
+    best_s = float(_axis_score(X, off, side, best[None])[0])
     for step in steps:
         C = best[None] + step * local
         C /= np.linalg.norm(C, axis=1, keepdims=True)
-        sc = _projected_fit(ctx, C)[0]
+        sc = _axis_score(X, off, side, C)
         k = int(np.argmin(sc))
         if sc[k] < best_s:
             best, best_s = C[k], float(sc[k])
@@ -503,7 +478,7 @@ def _cyl_follow_links(ctx: InitContext, th: FloatArray, rounds: int = 12) -> Flo
             break
         lp_prev = lp
         on = replace(ctx, a=lp, b=lp)  # each link as its surface sample
-        axis = _refine_axis(on, th[3:6],
+        axis = _refine_axis(on.surface_points, on.offsets, ctx.side, th[3:6],
                             (0.06, 0.02, 0.007), _LOCAL[:40])
         th = _cyl_from_axis(on, axis)
     return th
