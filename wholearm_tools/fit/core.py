@@ -547,7 +547,7 @@ def _votes(m: Model, th: np.ndarray, pts: np.ndarray, tol: float) -> tuple[int, 
     return int(np.sum(sd > tol)), int(np.sum(sd < -tol))
 
 
-def _decide_side(m: Model, nd: _Norm) -> list[float]:
+def _decide_side(m: Model, nd: _Norm, quick: bool = False) -> list[float]:
     """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
     link axes, which are in free space) all lie clearly on one side of the initial guess;
     otherwise both, and :func:`_pick_side` decides on the fitted surfaces."""
@@ -555,7 +555,8 @@ def _decide_side(m: Model, nd: _Norm) -> list[float]:
     if no_radius and len(nd.free) == 0:
         return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
     ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
-    cands = [c for c in m.init(ctx) if np.all(np.isfinite(c))]
+    init = m.quick_init if quick and m.quick_init else m.init
+    cands = [c for c in init(ctx) if np.all(np.isfinite(c))]
     if not cands:
         return [1.0, -1.0]
     th = min(cands, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
@@ -741,6 +742,7 @@ def fit_primitive(
     max_iter: int = 200,
     good_rms: float | None = None,
     covariance: bool = True,
+    quick: bool = False,
 ) -> FitResult:
     """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
 
@@ -784,6 +786,10 @@ def fit_primitive(
         Gauss-Newton information at the optimum).  False skips them for fits whose
         uncertainty nobody reads (proposals that do not reach selection): ``covariance`` is
         then None, ``ci95`` empty and ``sensitivity`` NaN.
+    quick : bool
+        One start from the type's quick algebraic guess (for a cylinder the coarse axis scan)
+        instead of the several careful starts: for the many minimal-set fits of a consensus
+        search, whose hypotheses are only tested for inliers.
 
     Returns
     -------
@@ -840,7 +846,7 @@ def fit_primitive(
     elif free_side is not None and not m.linear:
         sides = [float(free_side)]
     else:
-        sides = _decide_side(m, nd)
+        sides = _decide_side(m, nd, quick)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
     outliers: dict[float, np.ndarray] = {}
@@ -861,7 +867,11 @@ def fit_primitive(
                 outliers[side] = ~rf.inliers
                 continue
         ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, side)
-        cands = [_raw_from_params(m, initial, nd)] if initial is not None else m.init(ctx)
+        if initial is not None:
+            cands = [_raw_from_params(m, initial, nd)]
+        else:
+            cands = (m.quick_init(ctx) if quick and m.quick_init else m.init(ctx))
+            cands = cands[:1] if quick else cands
         cands = [c for c in cands if np.all(np.isfinite(c))]
         scored = (cands if len(cands) < 2 else
                   sorted(cands, key=lambda c, s=side: _cost_norm(m, c, s, nd, "linear", 1.0)))

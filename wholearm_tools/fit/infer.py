@@ -427,17 +427,19 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
                  start: FitResult | None = None, free_points: FloatArray | None = None,
-                 max_iter: int = 200, covariance: bool = True) -> FitResult:
+                 max_iter: int = 200, covariance: bool = True, quick: bool = False
+                 ) -> FitResult:
     """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given); ``free_points``
     (robot positions: free space) tell a closed primitive's free side; ``covariance`` False
-    skips the covariance and sensitivity (a proposal that only needs the parameters)."""
+    skips the covariance and sensitivity (a proposal that only needs the parameters);
+    ``quick`` starts from the type's quick guess only (a minimal set's hypothesis)."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
                           max_iter=max_iter, covariance=covariance)
         if f:
             return f
-    return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance)
+    return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance, quick=quick)
 
 
 def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
@@ -481,7 +483,7 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
                 p = np.exp(rd.log_prior[rs])
                 idx.append(int(rng.choice(rs, p=p / p.sum())))
             g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free, max_iter=20,
-                             covariance=False)
+                             covariance=False, quick=True)
             if not g:
                 continue
             r = np.abs(_residuals_of(g, rd, sel))
