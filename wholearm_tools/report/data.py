@@ -382,6 +382,7 @@ def load_report_data(map_path: str | Path) -> ReportData:
     A map fitted before report data existed, or without it, still gives a report: from the
     contact table beside it, without the pages that need the log.
     """
+    from wholearm_tools._io import load_json, read_text_input
     from wholearm_tools.contact_table import read_contact_table
     from wholearm_tools.mapfile import read_map
 
@@ -401,10 +402,8 @@ def load_report_data(map_path: str | Path) -> ReportData:
     if data_path.is_file():
         _checked(data_path, (outputs.get(data_name) or {}).get("sha256"), "report data",
                  map_path)
-        try:
-            doc = json.loads(data_path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"{data_path}: unreadable report data ({exc})") from None
+        doc = load_json(read_text_input(data_path, "report data"), str(data_path),
+                        "report data")
         if not isinstance(doc, dict) or not isinstance(doc.get("contacts"), dict):
             raise InputError(f"{data_path}: malformed report data (no contacts entry)")
         table_path = folder / str(doc["contacts"].get("path", "contacts.csv"))
