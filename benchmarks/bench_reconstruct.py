@@ -19,7 +19,13 @@ radius (major radius) error in percent per found curved surface; ``angle`` = axi
 error in degrees; ``srms`` = RMS distance of the fitted surface, sampled over its extent, to the
 true surface [mm].  Times are wall seconds of ``reconstruct`` (detect / classify / fit).
 
-Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0,1] [--scenarios a,b]
+The last table gives the totals per scenario over the seeds (surfaces found / touched /
+enough distinct contacts, off, extra, the largest size error) and the CPU seconds of
+``reconstruct`` per run and per contact (one worker, so the figure does not depend on the
+machine's cores).
+
+Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0-9] [--scenarios a,b]
+      [--engine physics] [--duration 120] [--no-tip-only] [--cache DIR]
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import warnings
 import numpy as np
 
 from wholearm_tools.contact_table import ContactTable
-from wholearm_tools.contacts import match_truth
+from wholearm_tools.contacts import match_events
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.pipeline import Reconstruction, fit_table, position_noise_floor, reconstruct
 from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_surfaces
@@ -59,7 +65,7 @@ def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
     truth = rec.run.truth
     surfaces = true_surfaces(truth)
     cs = truth_contact_surfaces(truth, surfaces)
-    mi = match_truth(rec.contacts, truth)
+    mi = match_events(rec.contacts, truth)
     table = rec.table
     surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
     out: dict[int, int] = {}
@@ -127,25 +133,39 @@ def _fmt(values: list[float], digits: int = 2) -> str:
 
 
 def main() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from bench_events import get_run, seeds_arg
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0,1")
+    ap.add_argument("--seeds", default="0,1", help="e.g. 0,1 or 0-9")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    ap.add_argument("--engine", choices=("kinematic", "physics"), default="kinematic")
+    ap.add_argument("--duration", type=float, default=None, help="arm seconds (scenario's)")
+    ap.add_argument("--friction", type=float, default=None)
+    ap.add_argument("--joint-friction", type=float, default=None)
+    ap.add_argument("--gravity", action="store_true")
+    ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
+    ap.add_argument("--no-tip-only", action="store_true", help="skip the tip-only refit")
     args = ap.parse_args()
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = seeds_arg(args.seeds)
     warnings.simplefilter("ignore")
     rows = []
     for name in args.scenarios.split(","):
         sc = load_scenario(name)
         B = float(sc.hints.get("B", 0.02))
         for seed in seeds:
-            run = sc.simulate(seed=seed).run
-            t0 = time.perf_counter()
-            rec = reconstruct(run, B=B)
-            wall = time.perf_counter() - t0
+            run = get_run(name, seed, args)
+            t0, c0 = time.perf_counter(), time.process_time()
+            rec = reconstruct(run, B=B, workers=1)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             cov = coverage(rec)
             both = score(rec, cov)
+            both["cpu"] = cpu
             t1 = time.perf_counter()
-            tip = score(tip_only(rec), cov)
+            tip = both if args.no_tip_only else score(tip_only(rec), cov)
             t_tip = time.perf_counter() - t1
             rows.append((name, seed, B, run.log.duration, len(rec.table), wall, rec.timings,
                          both, tip, t_tip, rec.messages))
@@ -193,6 +213,18 @@ def main() -> None:
         print(f"\nwell_junction reconstruct: worst {worst:.1f} s wall for "
               f"{wj[0][3]:.0f} s of arm time (target: < 30 s for 60 s of arm time, "
               "measured by bench_junction.py --duration 60)")
+    print(f"\n## Totals over seeds {args.seeds} ({args.engine})\n")
+    print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'off':>4}"
+          f"{'extra':>6}{'max size %':>11}{'cpu s/run':>10}{'cpu s/contact':>14}")
+    for name in dict.fromkeys(r[0] for r in rows):
+        rs = [r for r in rows if r[0] == name]
+        b = [r[7] for r in rs]
+        sizes = [x for bb in b for x in bb["size_pct"]]
+        print(f"{name:<14}{len(rs):>5}{sum(x['touched'] for x in b):>8}"
+              f"{sum(x['dof_cov'] for x in b):>7}{sum(x['found'] for x in b):>6}"
+              f"{sum(x['off'] for x in b):>4}{sum(x['extra'] for x in b):>6}"
+              f"{max(sizes, default=0.0):>11.3f}{np.mean([x['cpu'] for x in b]):>10.1f}"
+              f"{np.mean([x['cpu'] / max(r[4], 1) for x, r in zip(b, rs, strict=True)]):>14.3f}")
     notes = {m for r in rows for m in r[10]}
     if notes:
         print("\nmessages: " + "; ".join(sorted(notes)))
