@@ -131,12 +131,13 @@ def progress_enabled() -> bool:
 
 
 @contextmanager
-def stage(label: str) -> Iterator[None]:
+def stage(label: str) -> Iterator[Callable[[str], None]]:
     """A step of a command that may take a while.
 
     On a terminal (and without ``-q``) the line ``label … 12 s`` is redrawn every second and
     ends with the step's time; elsewhere, with ``-v``, the start and end are logged on stderr;
-    otherwise nothing is printed.
+    otherwise nothing is printed.  The block receives a function that names the part of the
+    step now running (``label: part … 12 s``; logged with ``-v``).
     """
     import logging
 
@@ -146,11 +147,20 @@ def stage(label: str) -> Iterator[None]:
     if not live:
         log.info("%s ...", label)
     stop = threading.Event()
+    part = [""]
+
+    def now() -> str:
+        return f"{label}: {part[0]}" if part[0] else label
 
     def redraw() -> None:
         while not stop.wait(1.0):
-            click.echo(f"\r\x1b[K{label} … {time.perf_counter() - start:.0f} s", err=True,
+            click.echo(f"\r\x1b[K{now()} … {time.perf_counter() - start:.0f} s", err=True,
                        nl=False)
+
+    def step(text: str) -> None:
+        part[0] = text
+        if not live:
+            log.info("%s: %s", label, text)
 
     thread = threading.Thread(target=redraw, daemon=True) if live else None
     if thread is not None:
@@ -158,7 +168,7 @@ def stage(label: str) -> Iterator[None]:
         thread.start()
     ok = False
     try:
-        yield
+        yield step
         ok = True
     finally:
         stop.set()

@@ -127,8 +127,8 @@ def _from_log(run: Path, output: Path, *, B: float, causal: bool, loss: str, rig
         data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
                         require_commands=True, **rig.read_kwargs())
     check_B(B, data.robot, what="--B")
-    with stage(f"reconstructing with B = {B:g} m (detect, classify, fit)"):
-        rec = reconstruct(data, B=B, causal=causal, loss=loss)
+    with stage(f"reconstructing with B = {B:g} m") as step:
+        rec = reconstruct(data, B=B, causal=causal, loss=loss, progress=step)
     folder = output.parent if str(output.parent) else Path(".")
     sm = map_with_provenance(rec.surface_map, folder, run, "log", reconstruction_parameters(rec))
     record = sm.meta["input"]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -471,13 +472,15 @@ def _with_contact_hints(table: ContactTable, free_points: NDArray | None) -> NDA
     return np.concatenate([np.asarray(free_points, dtype=float), own], axis=0)
 
 
-def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
+def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | None = None,
+                **options: Any) -> Reconstruction:
     """Detect, classify and fit a logged run.
 
     Parameters
     ----------
     run : Run (from ``wholearm_tools.logs.read_run`` or the simulator)
     B : float, smallest expected surface curvature radius [m]
+    progress : called with the name of each step as it starts (for a status line)
     **options : fields of :class:`ReconstructParams`
 
     Returns
@@ -489,11 +492,14 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
     from wholearm_tools.contacts import detect_contacts
 
     params = ReconstructParams(B=B, **options)
+    say = progress or (lambda _: None)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
+    say("detecting contacts")
     contacts = detect_contacts(run.log, run.robot)
     timings["detect"] = time.perf_counter() - clock
     clock = time.perf_counter()
+    say(f"classifying {len(contacts)} contacts (eq. 2)")
     classification = tip_probability(run, contacts, params.B, causal=params.causal)
     timings["classify"] = time.perf_counter() - clock
     table = contact_table(run.robot, contacts, classification)
@@ -510,6 +516,7 @@ def reconstruct(run: Run, B: float = 0.02, **options: Any) -> Reconstruction:
     else:
         from wholearm_tools.classify.swept import swept_map
 
+        say(f"fitting primitives to {len(table)} contacts")
         swept = (SweptTest(swept_map(run.robot, np.asarray(run.log.q), B=params.B))
                  if params.use_sweep else None)
         surface_map, fits, table, messages = fit_table(
