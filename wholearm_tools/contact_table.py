@@ -11,8 +11,8 @@ Columns (planar runs have only x and y; ``z`` columns are omitted):
 an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_radius`` [m],
 ``primitive`` (id of the primitive that explains it, -1 none, empty before fitting),
 ``residual`` [m] (distance to that primitive minus the radius), ``p_tip_map`` / ``label_map``
-(the tip probability and label refined by the fitted map, see
-:mod:`wholearm_tools.classify.refine`; empty before fitting), ``link_by_map`` (the link the
+(the tip probability and label refined by the fitted map: the posterior of the readings in
+:func:`wholearm_tools.fit.infer.infer`; empty before fitting), ``link_by_map`` (the link the
 fitted map supports where the joint signals could not tell the links of a rigid group apart;
 ``link`` elsewhere, empty before fitting).
 """

@@ -36,7 +36,7 @@ class ReconstructParams:
     loss : robust loss of the fits ("linear", "huber", "cauchy")
     noise : residual noise level [m]; None estimates it
     free_hints : number of robot poses sampled as free-space hints for the fits
-    use_sweep : reject primitives that the robot's own motion cut through (:func:`robot_sweep`)
+    use_sweep : score hypotheses against the B-dilated swept map (the free-space term)
     workers : processes for the seed fits (None: every core, at most 8); the map does not
         depend on it
     """
@@ -120,45 +120,6 @@ def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> N
     a, b = robot.link_segments(q[idx])
     mid = 0.5 * (a + b)
     return np.concatenate([a, mid, b], axis=1).reshape(-1, 3)[:, : robot.dim]
-
-
-def robot_sweep(robot: RobotModel, q: NDArray[np.float64], *, step: float = 0.01) -> Any:
-    """The robot's volume over the run as capsules (:class:`wholearm_tools.fit.data.Sweep`).
-
-    Poses are kept whenever some joint moved by more than ``step`` radians since the last kept
-    one (the arm at rest or creeping adds nothing); each pose gives its link capsules and, when
-    it is wider than the last link, the tip sphere.
-    """
-    from wholearm_tools.fit.data import Sweep
-
-    q = np.asarray(q, dtype=float)
-    dim = robot.dim
-    if len(q) == 0:
-        return Sweep(np.zeros((0, dim)), np.zeros((0, dim)), np.zeros(0))
-    keep = [0]
-    i, n, window = 0, len(q), 256
-    while True:
-        # the first later sample that moved more than `step` from the last kept one
-        lo = i + 1
-        while lo < n:
-            hi = min(lo + window, n)
-            far = np.flatnonzero(np.max(np.abs(q[lo:hi] - q[i]), axis=1) > step)
-            if far.size:
-                break
-            lo = hi
-        if lo >= n:
-            break
-        i = lo + int(far[0])
-        keep.append(i)
-    pts = robot.joint_positions(q[keep])[..., :dim]           # (P, n+1, d)
-    a = pts[:, :-1].reshape(-1, dim)
-    b = pts[:, 1:].reshape(-1, dim)
-    r = np.tile(robot.link_radii, len(keep))
-    if robot.tip_radius > robot.link_radii[-1]:
-        tip = pts[:, -1]
-        a, b = np.vstack([a, tip]), np.vstack([b, tip])
-        r = np.concatenate([r, np.full(len(keep), robot.tip_radius)])
-    return Sweep(a, b, r)
 
 
 #: smallest geometric noise level assumed for contacts [m] when the log gives none

@@ -32,7 +32,7 @@ def _readings(d: FitData, p_tip_tips: float = 0.9, p_tip_links: float = 0.1,
 
 
 def test_planar_scene_selects_two_lines_and_a_circle_and_nothing_else():
-    data, prims, label = planar_scene(np.random.default_rng(3), noise=2e-4)
+    data, prims, _ = planar_scene(np.random.default_rng(3), noise=2e-4)
     outliers = np.array([[0.4, 0.2], [0.6, -0.2], [-0.6, -0.2]])
     rd, _ = _readings(data, extra=outliers)
     inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4,

@@ -253,7 +253,7 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     each group (the torque-identified link ``lo`` when no candidate keeps any admissible
     boundary) and ``(G, n)`` each link's share of the group's admissible mass (one-hot at the
     chosen link when none has any): the prior the fitted map later weighs the links with
-    (:func:`wholearm_tools.classify.refine.link_evidence`).
+    (the readings of every candidate link, :mod:`wholearm_tools.fit.readings`).
     """
     from wholearm_tools.classify.swept import swept_map
     from wholearm_tools.classify.tip import ClassifyParams, _boundary

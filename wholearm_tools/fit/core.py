@@ -40,13 +40,12 @@ import casadi as ca
 import numpy as np
 
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.data import FitData, Sweep
+from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import (
     CA_OPS,
     MODELS,
     InitContext,
     Model,
-    perp_bases,
     signed_distance_np,
 )
 from wholearm_tools.fit.result import FitResult
@@ -587,111 +586,6 @@ def _local_hints(nd: _Norm) -> np.ndarray:
     r = _near_radius(nd.tip_w, nd.link_w, 0.25)
     d2 = np.min(np.sum((hints[:, None, :] - sup[None, :, :]) ** 2, axis=2), axis=1)
     return hints[d2 <= r * r]
-
-
-def free_space_violation(kind: str, params: dict[str, Any], free_side: float, data: FitData
-                         ) -> float:
-    """Fraction of the free-space hints next to the contacts of ``data`` (within three contact
-    radii) that lie on the occupied side of the primitive — 0 for a surface the robot was
-    always in front of; large for a kinematic artefact such as the sphere of one joint's
-    positions about the joint before it (all contacts at that joint lie on it, the next link
-    pierces it)."""
-    m = MODELS[kind]
-    nd = _Norm(np.zeros(m.dim), 1.0, data.tip_points, data.tip_radius, data.tip_weight,
-               data.link_a, data.link_b, data.link_radius, data.link_weight, data.free_points)
-    th = _raw_from_params(m, params, nd)
-    # the support is where the contacts touch: tips, and links at their least clearance
-    _, t, _ = _link_min(m, th, float(free_side), nd.a, nd.b)
-    touch = nd.a + t[:, None] * (nd.b - nd.a)
-    local = _local_hints(dataclasses.replace(nd, tip=np.vstack([nd.tip, touch]),
-                                             a=nd.a[:0], b=nd.b[:0]))
-    if len(local) == 0:
-        return 0.0
-    sd = float(free_side) * signed_distance_np(m, th, local)
-    return float(np.mean(sd < 0.0))
-
-
-@dataclass(frozen=True, slots=True)
-class SweepCheck:
-    """Where the robot's sweep cuts into a fitted surface next to its contacts
-    (:func:`sweep_violation`).
-
-    ``cuts``: capsules that penetrate next to the support, of ``checked`` capsules near it;
-    ``contradicted``: fraction of the support points with a cut within ``near`` of them;
-    ``interior``: cuts whose foot the support surrounds (support points on every side of it
-    within ``3 near``, in the surface's tangent space).
-    """
-
-    cuts: int
-    checked: int
-    contradicted: float
-    interior: int
-
-    def rules_out(self) -> bool:
-        """Whether the cuts rule the surface out: many capsules cut it (more than twice and
-        in more than 1 % of those checked), next to a good share (15 %) of its contacts or
-        inside the region they surround.  A true surface is cut only past the edge of its
-        support — through a junction's window, beyond a wall's corner — next to the few
-        contacts on that edge; a surface that is not there is cut between its contacts."""
-        if self.cuts <= max(2, 0.01 * self.checked):
-            return False
-        return self.contradicted > 0.15 or self.interior > max(2, 0.002 * self.checked)
-
-
-def _surrounded(primitive: Any, x: np.ndarray, foot: np.ndarray, support: np.ndarray,
-                radius: float) -> np.ndarray:
-    """Per foot point: whether the support points within ``radius`` of it lie on every side
-    of it in the surface's tangent space (1-D for a curve, 2-D for a surface)."""
-    g = np.asarray(primitive.gradient(x))                                # (k, d) unit normals
-    dv = support[None, :, :] - foot[:, None, :]                          # (k, S, d)
-    near = np.sum(dv * dv, axis=2) <= radius * radius
-    dv = dv - np.sum(dv * g[:, None, :], axis=2)[..., None] * g[:, None, :]
-    if foot.shape[1] == 2:
-        c = dv[..., 0] * -g[:, None, 1] + dv[..., 1] * g[:, None, 0]    # along the tangent
-        return np.any(near & (c > 1e-9), axis=1) & np.any(near & (c < -1e-9), axis=1)
-    e1, e2 = perp_bases(g)
-    ang = np.arctan2(np.sum(dv * e2[:, None], axis=2), np.sum(dv * e1[:, None], axis=2))
-    ok = near & (np.linalg.norm(dv, axis=2) > 1e-9)
-    first = np.where(ok.any(axis=1), ang[np.arange(len(ang)), np.argmax(ok, axis=1)], 0.0)
-    ang = np.sort(np.where(ok, ang, first[:, None]), axis=1)
-    gaps = np.diff(np.concatenate([ang, ang[:, :1] + 2 * np.pi], axis=1), axis=1)
-    return gaps.max(axis=1) < np.pi
-
-
-def sweep_tolerance(sigma: float) -> float:
-    """Depth [m] a sweep capsule must cut into a fitted surface to count against it:
-    ``max(5 sigma, 2 mm)``, for the sweep rule of fit-and-grow and the report rules of
-    :mod:`wholearm_tools.fit.crossing` alike."""
-    return max(5.0 * float(sigma), 2e-3)
-
-
-def sweep_violation(primitive: Any, free_side: float, support: np.ndarray, sweep: Sweep,
-                    *, near: float, tol: float) -> SweepCheck:
-    """How the robot's sweep cuts into a fitted surface next to its own contacts.
-
-    A capsule of the sweep *penetrates* the primitive when its clearance
-    ``free_side * sd - radius`` falls below ``-tol``; it counts when the point of the surface
-    closest to its deepest point (its foot) lies within ``near`` of a support point (the
-    surface is known there; far away the primitive's infinite extension may well cross the
-    robot's path — over the top of a post, into the branch of a junction).  See
-    :class:`SweepCheck` for the figures and the rule that rules a surface out.
-    """
-    idx = sweep.near(support, near)
-    if idx.size == 0:
-        return SweepCheck(0, 0, 0.0, 0)
-    a, b, r = sweep.a[idx], sweep.b[idx], sweep.radius[idx]
-    clear, t = primitive.segment_signed_distance(a, b, free_side=float(free_side))
-    deep = np.flatnonzero(np.asarray(clear) - r < -tol)
-    if deep.size == 0:
-        return SweepCheck(0, int(idx.size), 0.0, 0)
-    x = a[deep] + np.asarray(t)[deep, None] * (b[deep] - a[deep])
-    foot = np.asarray(primitive.closest_point(x))
-    close = np.sum((foot[:, None, :] - support[None, :, :]) ** 2, axis=2) <= near * near
-    hit = close.any(axis=1)                                              # (k,) cuts that count
-    interior = int(np.count_nonzero(_surrounded(primitive, x[hit], foot[hit], support,
-                                                3.0 * near))) if hit.any() else 0
-    return SweepCheck(int(np.count_nonzero(hit)), int(idx.size),
-                      float(np.mean(close.any(axis=0))), interior)
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from wholearm_tools.errors import InputError
 
@@ -189,61 +187,3 @@ class FitData:
             self.link_a[li].copy(), self.link_b[li].copy(), self.link_radius[li].copy(),
             self.link_weight[li].copy(), self.free_points.copy(),
         )
-
-
-@dataclass(frozen=True, eq=False)
-class Sweep:
-    """The robot's volume over a run as capsules: where no surface can be.
-
-    ``a, b : (S, d)`` capsule axes (a sphere is a zero-length capsule), ``radius : (S,)``.
-    A surface the robot touched is never *penetrated* by it: a fitted primitive that cuts into
-    the sweep next to its own contacts is not the surface that stopped the arm (see
-    :func:`wholearm_tools.fit.core.sweep_violation`).
-    """
-
-    a: FloatArray
-    b: FloatArray
-    radius: FloatArray
-
-    def __post_init__(self) -> None:
-        a = np.array(self.a, dtype=float)
-        b = np.array(self.b, dtype=float)
-        r = np.array(self.radius, dtype=float).reshape(-1)
-        if a.ndim != 2 or a.shape != b.shape or a.shape[1] not in (2, 3) or len(r) != len(a):
-            raise InputError(f"expected sweep a, b of shape (S, 2|3) and radius (S,), got "
-                             f"{a.shape}, {b.shape}, {r.shape}")
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(r >= 0)):
-            raise InputError("sweep capsules must be finite with radius >= 0")
-        _freeze(a, b, r)
-        object.__setattr__(self, "a", a)
-        object.__setattr__(self, "b", b)
-        object.__setattr__(self, "radius", r)
-
-    def __len__(self) -> int:
-        return len(self.a)
-
-    @property
-    def dim(self) -> int:
-        return int(self.a.shape[1])
-
-    @functools.cached_property
-    def _tree(self) -> Any:
-        from scipy.spatial import cKDTree
-
-        return cKDTree(0.5 * (self.a + self.b))
-
-    @functools.cached_property
-    def _reach(self) -> float:
-        """Largest distance from a capsule's midpoint to its surface."""
-        if len(self) == 0:
-            return 0.0
-        return float(np.max(0.5 * np.linalg.norm(self.b - self.a, axis=1) + self.radius))
-
-    def near(self, points: ArrayLike, distance: float) -> NDArray[np.int64]:
-        """Indices of the capsules that come within ``distance`` of any of ``points``."""
-        pts = np.asarray(points, dtype=float).reshape(-1, self.dim)
-        if len(self) == 0 or len(pts) == 0:
-            return np.zeros(0, dtype=np.int64)
-        hits = self._tree.query_ball_point(pts, distance + self._reach)
-        idx = np.unique(np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]))
-        return idx

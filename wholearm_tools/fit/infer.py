@@ -9,20 +9,25 @@ Bajcsy 1995: fit-and-grow with model selection), scored by one negative log-like
   ``-log sum_r pi_r exp(-z_rk^2 / 2)`` with ``z_rk`` the reading's residual in noise sigmas
   (and ``-log(1 - outlier_prior)``); unexplained, ``-log(outlier_prior) + log(L / (sqrt(2 pi)
   sigma))`` for a scene of size ``L``.  It takes the cheapest;
-* each primitive costs ``bic * dof / 2 * log(N)`` (BIC), and its **free-space term**: the robot
-  occupied space where the primitive says the surface is, over the region its contacts span,
-  contradicts it.  The share ``f_k`` of sample points of that region the robot's sweep cuts
-  into (deeper than the noise) is the probability that any one of its contacts is read onto a
-  surface that is not there; it costs ``f_k`` of its contacts' unexplained cost;
+* each primitive costs its own code length, ``dof * (log(L / sigma) + bic / 2 * log(n_k))``
+  for ``n_k`` member contacts (two-part MDL: each parameter to the precision its contacts
+  determine it), and its **free-space term**: the robot occupied space where the primitive
+  says the surface is.  Each sample point of the region its contacts span (their feet, and
+  points every ``B`` along the edges of their minimum spanning tree) that the B-dilated sweep
+  cuts into, deeper than the noise, costs as much as one unexplained contact;
+* a side reading cannot touch at either end of its link (the inner end is the joint the link
+  turns about; at the outer end the link's sphere encloses the cap): its residual there is
+  infinite;
 * a closed primitive (circle, sphere) whose inside is free space must hold the robot's base
   (the arm reaches every contact from its base through free space).
 
 Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled contacts, each
 neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
-unions of two selected primitives, and lower-dimensional types on a selected one's contacts.
+unions of two selected primitives (as either's type or a richer one), every other type on a
+selected one's contacts, and new seeds among the contacts left unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
-single additions and removals until it stops falling).  Assignment (each contact to its
+single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
 until the score stops falling — the classification is the E-step of the fit.  The noise level
 is re-estimated from the assigned residuals at each round.

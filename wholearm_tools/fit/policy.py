@@ -56,10 +56,8 @@ class FitPolicy:
         1 m arm.
     max_rel_std : a reported primitive's worst-determined parameter combination, under that
         error model, must have a standard deviation of at most this fraction of the size of
-        its support.
-    max_influence : ... and no single contact may carry more than this share of the
-        information in any direction (its leverage): above it, that one inferred contact alone
-        decides the primitive and its residual cannot show whether it is wrong.
+        its support, with all its contacts and without any one of them (a primitive one
+        inferred contact alone determines rests on that contact's reading).
 
     Types
     -----
@@ -84,7 +82,6 @@ class FitPolicy:
     noise: float | None = None
     kinematic_error: float = 5e-4
     max_rel_std: float = 0.2
-    max_influence: float = 0.95
     min_radius_over_b: float = 0.5
     max_radius_ratio: float = 50.0
 
@@ -99,7 +96,5 @@ class FitPolicy:
         for name in ("max_seeds", "consensus_trials", "rounds", "em_rounds", "neighbours"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
-        if not 0.0 < self.max_influence <= 1.0:
-            raise InputError(f"max_influence must be in (0, 1], got {self.max_influence}")
         if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):
             raise InputError(f"noise must be a positive length, got {self.noise!r}")
