@@ -332,6 +332,8 @@ def solve(m: Model, nd: Any, th0: np.ndarray, side: float, loss: str, delta: flo
             wr = W if loss == "linear" else W * irls_weight(sw * r, loss, delta)
             g = side * (Jm.T @ (wr * r))
             H = Jm.T @ (wr[:, None] * Jm)
+            if not (np.all(np.isfinite(H)) and np.all(np.isfinite(g))):
+                break  # a distance not differentiable here (a point on an axis or apex)
             # Marquardt's scaling: the damped system is (H + mu D) s = -g, D = diag(H); in
             # scaled coordinates one eigen-decomposition serves every damping tried
             dH = np.diag(H)
