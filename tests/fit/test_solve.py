@@ -170,3 +170,20 @@ def test_null_space_is_an_orthonormal_basis_of_the_kernel(k):
     np.testing.assert_allclose(N.T @ N, np.eye(7 - k), atol=1e-12)
     # a repeated row adds no constraint
     assert null_space(np.vstack([G, G[:1]])).shape == (7, 7 - k)
+
+
+def test_a_contact_at_the_start_centre_does_not_raise():
+    """The distance to a circle is not differentiable at its centre: a start centred on a
+    contact gives a non-finite Jacobian, and the fit reports instead of raising."""
+    import warnings
+
+    from wholearm_tools.fit import FitData, fit_primitive
+
+    ang = np.linspace(0, 2 * np.pi, 10, endpoint=False)
+    tips = np.vstack([np.c_[0.2 * np.cos(ang), 0.2 * np.sin(ang)], [[0.0, 0.0]]])
+    data = FitData.create(tips, 0.0, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), 0.0, 1.0, dim=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = fit_primitive("circle", data, initial={"center": np.zeros(2), "radius": 0.2},
+                            free_side=1)
+    assert np.all(np.isfinite(res.params["center"]))
