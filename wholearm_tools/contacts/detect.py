@@ -49,7 +49,9 @@ class DetectionParams:
     k_torque : float
         A joint at rest is *loaded* when its torque departs from the learned free-motion model
         by more than the Coulomb friction it can hold there plus ``k_torque`` sigmas of the
-        model's residual (:mod:`wholearm_tools.contacts.events`).
+        model's error: its robust residual scale in free motion, or the torque noise at rest
+        where that is larger (:mod:`wholearm_tools.contacts.events`).  A load the model could
+        be wrong by in free motion is no evidence of contact at rest.
     min_stop_time : float
         Seconds of obstruction an event needs (and a joint's obstruction, to count).
     min_stop_samples : int
@@ -540,7 +542,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     if params.torque_threshold is not None:
         tau_th = np.broadcast_to(np.asarray(params.torque_threshold, float), (n,)).copy()
     else:
-        tau_th = fm.coulomb + params.k_torque * fm.rest_scale
+        tau_th = fm.coulomb + params.k_torque * np.maximum(fm.rest_scale, fm.scale)
     loaded = np.abs(resid) > tau_th
     min_len = max(params.min_stop_samples, int(np.ceil(params.min_stop_time / dt - 1e-9)))
     release = max(1, round(params.release_time / dt))
