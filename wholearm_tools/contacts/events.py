@@ -261,16 +261,14 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
     N, n = obstructed.shape
     active = bridge(obstructed.any(axis=1), release)
     if dragging is not None:
-        # a slide joins the obstruction it ends in, and two obstructions it connects: the gap
-        # before an obstruction is filled where the arm dragged all the way through it
+        # a slide is part of the obstruction it ends in (the arm dragged along the surface
+        # until it held), and joins two obstructions it connects (a rebound that comes back)
         drag = dragging.any(axis=1)
-        s_, e_ = runs(active)
-        for k, a in enumerate(s_):
+        for a in runs(active)[0]:
             b = a
             while b > 0 and drag[b - 1]:
                 b -= 1
-            if b < a and (b == 0 or k == 0 or b <= e_[k - 1] + release):
-                active[b:a] = True
+            active[b:a] = True
     out: list[Event] = []
     starts, ends = runs(active)
     for s, e in zip(starts, ends, strict=True):
@@ -292,7 +290,9 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
             hit = np.flatnonzero(obstructed[s:e, j])
             if hit.size:
                 onset[j] = s + int(hit[0])
-        pieces = [s]
+        # second contacts are told from the first obstruction on (a slide before it moved
+        # every joint, freely or not)
+        pieces = [s + int(np.flatnonzero(obstructed[s:e].any(axis=1))[0])]
         # a joint obstructed later than the joints inward of it, which moved freely until it
         # stopped, stopped against an obstacle of its own: a second contact from its onset
         link_so_far = -1
@@ -305,6 +305,7 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
                 if was_free.size and np.count_nonzero(was_free) >= 0.5 * was_free.size:
                     pieces.append(int(onset[j]))
             link_so_far = max(link_so_far, int(j))
+        pieces[0] = s
         bounds = [*pieces, e]
         for a, b in itertools.pairwise(bounds):
             joints = tuple(int(j) for j in np.flatnonzero(obstructed[a:b].any(axis=0)))
