@@ -15,6 +15,7 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
@@ -128,3 +129,26 @@ def worker_pool(workers: int | None = None) -> Iterator[Executor | None]:
     ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
     with process_pool(n, mp_context=ctx) as pool:
         yield pool
+
+
+def interruptible_import(name: str) -> Any:
+    """Import module ``name`` so that a Ctrl-C during the import interrupts the command.
+
+    Some libraries guard their optional imports with ``except BaseException`` (trimesh, and
+    yourdfpy through it), which swallows the KeyboardInterrupt raised inside them: the command
+    would then carry on as if nothing had been pressed.  The interrupt is held while the module
+    is imported and raised after it."""
+    import importlib
+    import threading
+
+    if name in sys.modules or threading.current_thread() is not threading.main_thread():
+        return importlib.import_module(name)
+    pressed: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pressed.append(signum))
+    try:
+        module = importlib.import_module(name)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if pressed:
+        raise KeyboardInterrupt
+    return module

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike
 
 from wholearm_tools import __version__
 from wholearm_tools._io import atomic_path, write_bytes_atomic
+from wholearm_tools._parallel import interruptible_import
 from wholearm_tools.errors import InputError, OutputError
 from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap, jsonable
 from wholearm_tools.mesh.extent import full_extent
@@ -205,7 +206,7 @@ def _rgba8(colour: Sequence[float]) -> np.ndarray:
 
 
 def _trimesh(part: SurfaceMesh, material: bool) -> Any:
-    import trimesh
+    trimesh = interruptible_import("trimesh")
     from trimesh.visual import TextureVisuals
     from trimesh.visual.material import PBRMaterial
 
@@ -224,7 +225,7 @@ def _scene(parts: Sequence[SurfaceMesh], frame: str, scene_meta: Mapping[str, An
            y_up: bool, material: bool) -> Any:
     """A trimesh scene: a root node named ``frame`` (turned to +Y up when ``y_up``) with one
     child node per part, the part's metadata on the node."""
-    import trimesh
+    trimesh = interruptible_import("trimesh")
 
     scene = trimesh.Scene(base_frame="world")
     scene.graph.update(frame_to=frame, frame_from="world",
@@ -262,6 +263,7 @@ def _tidy_gltf(tree: dict[str, Any]) -> None:
 
 def _write_gltf(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
                 scene_meta: Mapping[str, Any]) -> None:
+    interruptible_import("trimesh")
     from trimesh.exchange.gltf import export_glb, export_gltf
 
     scene = _scene(parts, frame, scene_meta, y_up=True, material=True)
@@ -277,6 +279,7 @@ def _write_gltf(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
 
 def _write_obj(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
                scene_meta: Mapping[str, Any]) -> None:
+    interruptible_import("trimesh")
     from trimesh.exchange.obj import export_obj
 
     scene = _scene(parts, frame, scene_meta, y_up=False, material=False)
@@ -302,7 +305,7 @@ def _merged(parts: Sequence[SurfaceMesh]) -> tuple[TriangleMesh, np.ndarray, np.
 
 def _write_ply_stl(parts: Sequence[SurfaceMesh], path: Path, fmt: str, frame: str,
                    scene_meta: Mapping[str, Any]) -> None:
-    import trimesh
+    trimesh = interruptible_import("trimesh")
     from trimesh.exchange.ply import export_ply
     from trimesh.exchange.stl import export_stl
 

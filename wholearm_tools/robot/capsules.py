@@ -114,7 +114,9 @@ def resolve_mesh_path(filename: str, *, urdf_dir: Path | None, package_paths: Se
 def _mesh_vertices(geometry: Any, *, urdf_dir: Path | None, package_paths: Sequence[Path],
                    source: str, link: str) -> np.ndarray:
     """Vertices (k, 3) of one collision geometry in its own frame (primitives covered)."""
-    import trimesh
+    from wholearm_tools._parallel import interruptible_import
+
+    trimesh = interruptible_import("trimesh")
 
     if geometry.mesh is not None:
         path = resolve_mesh_path(geometry.mesh.filename, urdf_dir=urdf_dir,

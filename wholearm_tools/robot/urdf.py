@@ -96,7 +96,9 @@ def parse_urdf_xml(text: str, source: str = "URDF") -> ET.Element:
 
 def _yourdfpy_robot(text: str, source: str) -> Any:
     """``yourdfpy.Robot`` of an already validated URDF text."""
-    import yourdfpy
+    from wholearm_tools._parallel import interruptible_import
+
+    yourdfpy = interruptible_import("yourdfpy")
 
     try:
         urdf = yourdfpy.URDF.load(io.BytesIO(text.encode("utf-8")), build_scene_graph=False,
