@@ -32,6 +32,9 @@ def test_inspect_written_run(tmp_path, run):
     assert topics["/joint_states"]["rate_hz"] == pytest.approx(100.0)
     assert info["duration_s"] == pytest.approx(0.19)
     assert info["metadata"]["wholearm"]["scenario"] == "wall"
+    # metadata values are text in the file; numbers come out typed, versions stay text
+    assert info["metadata"]["wholearm"]["format_version"] == 1
+    assert isinstance(info["metadata"]["wholearm"]["tool_version"], str)
 
     result = CliRunner().invoke(command, [str(path)])
     assert result.exit_code == 0, result.output

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -147,6 +148,20 @@ def inspect_log(path: str | os.PathLike[str], *, joint_topic: str | None = None
         "robot": robot,
         "commands": commands,
         "ground_truth": truth,
-        "metadata": scan.metadata,
+        "metadata": {name: {k: _scalar(v) for k, v in rec.items()}
+                     for name, rec in scan.metadata.items()},
         "attachments": list(scan.attachments),
     }
+
+
+def _scalar(text: str) -> Any:
+    """An MCAP metadata value (always a string in the file) as the number it spells, when it
+    spells one exactly (``"1"`` -> 1, ``"0.5"`` -> 0.5; ``"0.1.0"`` stays text)."""
+    for kind in (int, float):
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            continue
+        if kind is int or math.isfinite(value):
+            return value
+    return text
