@@ -205,7 +205,6 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               swept: Any = None, base: NDArray | None = None, workers: int | None = None,
               candidates: LinkCandidates | None = None, reach: float | None = None,
               policy: Any = None,
-              approach: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]] | None = None,
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """The inference loop over a contact table → (map, fits, table with assignments, messages).
 
@@ -218,12 +217,9 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     kinematic_error`` of ``reach``, or of the scene size without a robot) or is not reported.
     ``swept`` (where the robot has been, e.g. :class:`SweptTest` of the swept map) and
     ``base`` are the free-space evidence; ``free_points`` (robot positions) tell a closed
-    primitive's side.  ``approach(rows, links) -> (a, b)``: the axis of link ``links[k]``
-    shortly before contact ``rows[k]`` (a reading must have come towards the surface that
-    stopped it; see :meth:`wholearm_tools.fit.infer.Scorer.log_joint`); None when the
-    motion is unknown (a contact table alone).  ``workers``: processes for the seed
-    proposals (None: every core, at most 8; the map does not depend on it).  Poor data never
-    raise: the map is then empty (or short) and ``messages`` say why.
+    primitive's side.  ``workers``: processes for the seed proposals (None: every core, at
+    most 8; the map does not depend on it).  Poor data never raise: the map is then empty (or
+    short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive
     from wholearm_tools.fit.gate import report_gate
@@ -268,10 +264,6 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     rd = readings_from_contacts(table.link[reps], table.p_tip[reps], table.tip_center[reps],
                                 table.tip_radius[reps], table.seg_a[reps], table.seg_b[reps],
                                 table.link_radius[reps], cands)
-    if approach is not None and len(rd):
-        pa, pb = approach(reps[rd.contact], rd.link)
-        pa = np.where(rd.sphere[:, None], pb, pa)   # a sphere reading: the outer end's centre
-        rd = dataclasses.replace(rd, prev_a=pa, prev_b=pb)
     need = min(MODELS[k].dof for k in kinds) + 2
     if rd.n_contacts < need:
         messages.append(f"too few distinct contacts to fit a primitive: {rd.n_contacts} given, "
@@ -424,26 +416,6 @@ def link_candidates(robot: RobotModel, contacts: Any,
         seg_b=seg_b, link_radius=link_radius, p_tip=p_tip)
 
 
-def approach_geometry(run: Run, contacts: Any, window: float | None = None
-                      ) -> Callable[[NDArray, NDArray], tuple[NDArray, NDArray]]:
-    """``(rows, links) -> (a, b)``: the axis of each link at the configuration logged
-    ``window`` seconds (default: the detector's release time) before each contact began."""
-    from wholearm_tools.contacts.detect import DetectionParams
-
-    window = DetectionParams().release_time if window is None else float(window)
-    t = np.asarray(run.log.t, dtype=float)
-    k = np.clip(np.searchsorted(t, np.asarray(contacts.t, dtype=float) - window), 0,
-                len(t) - 1)
-    q_prev = np.asarray(run.log.q, dtype=float)[k]
-
-    def geometry(rows: NDArray, links: NDArray) -> tuple[NDArray, NDArray]:
-        a, b, _, _ = _link_geometry(run.robot, q_prev[np.asarray(rows)],
-                                    np.asarray(links, dtype=np.int64))
-        return a, b
-
-    return geometry
-
-
 def _with_contact_hints(table: ContactTable, free_points: NDArray | None) -> NDArray | None:
     """Free-space hints plus, for every contact, two points on the contacting link's axis just
     behind its outer end (1.5 and 3 contact radii inwards): the robot itself was there, right
@@ -515,8 +487,7 @@ def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | 
             candidates=link_candidates(
                 run.robot, contacts, lambda c: tip_probability(run, c, params.B,
                                                                causal=params.causal).p_tip),
-            reach=float(run.robot.reach),
-            approach=approach_geometry(run, contacts))
+            reach=float(run.robot.reach))
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,
                           classification=classification, table=table, fits=fits,

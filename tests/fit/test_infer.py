@@ -1,8 +1,6 @@
 """The inference loop on built contacts: which primitives it selects, how it reads each contact
 (tip sphere or link side: the E-step), what it leaves unexplained, and the report gate."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 from fit_synth import contacts, param_error, planar_scene
@@ -128,22 +126,3 @@ def test_report_gate_passes_a_well_spread_circle_and_stops_a_pinned_one():
                     max_rel_std=FitPolicy().max_rel_std)
     assert not g
     assert g.pivot == len(ang) - 1 or g.worst_std > FitPolicy().max_rel_std
-
-
-def test_tips_that_moved_along_a_line_do_not_make_it_a_surface():
-    """Eight tips that stopped on a straight line while moving along it: without the approach
-    they are a line; a surface there could not have stopped them, so with it they are not."""
-    x = np.linspace(-0.3, 0.3, 8)
-    tips = np.c_[x, np.full(8, 0.3)] + 1e-5 * np.random.default_rng(0).normal(size=(8, 2))
-    w = np.full(8, 0.02)
-    plain = readings_from_contacts(np.zeros(8, int), np.full(8, 0.9), tips, w, tips, tips, w)
-    inf = infer(plain, kinds=("line", "circle"), B=0.02, noise_floor=1e-5, rng=0)
-    assert [h.kind for h in inf.selected] == ["line"]
-    before = tips - np.array([0.05, 0.0])                 # moving along x: along the line
-    along = dataclasses.replace(plain, prev_a=before[plain.contact], prev_b=before[plain.contact])
-    assert infer(along, kinds=("line", "circle"), B=0.02, noise_floor=1e-5, rng=0).selected == ()
-    towards = tips - np.array([0.0, 0.05])               # moving up into the line: stopped by it
-    into = dataclasses.replace(plain, prev_a=towards[plain.contact],
-                               prev_b=towards[plain.contact])
-    assert [h.kind for h in infer(into, kinds=("line", "circle"), B=0.02, noise_floor=1e-5,
-                                  rng=0).selected] == ["line"]

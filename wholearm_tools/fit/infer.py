@@ -91,7 +91,6 @@ class Hypothesis:
     cost: FloatArray | None = None
     free: float = 0.0          # sweep cuts in its support (see Scorer.free_share)
     sigma: float = math.nan
-    approach: FloatArray | None = None   # how far each reading came towards it (see Scorer)
 
     @property
     def dof(self) -> int:
@@ -128,9 +127,7 @@ def _logsumexp_by_contact(v: FloatArray, starts: IntArray) -> FloatArray:
     """Per contact, ``log sum exp`` of the values of its readings (readings sorted by contact)."""
     mx = np.maximum.reduceat(v, starts)
     n_per = np.diff(np.r_[starts, len(v)])
-    shift = np.where(np.isfinite(mx), mx, 0.0)  # a contact none of whose readings is possible
-    with np.errstate(divide="ignore"):
-        return shift + np.log(np.add.reduceat(np.exp(v - np.repeat(shift, n_per)), starts))
+    return mx + np.log(np.add.reduceat(np.exp(v - np.repeat(mx, n_per)), starts))
 
 
 def truncated_sigma(r: ArrayLike, start: float, k: float, rounds: int = 30) -> float:
@@ -209,11 +206,6 @@ class Scorer:
         self.base = base
         self.B = B
         self.all_data = readings.fit_data()
-        prev = readings.previous()
-        self.prev_data = None if prev is None else prev.fit_data()
-        self.moved = (None if prev is None else
-                      np.maximum(np.linalg.norm(readings.a - readings.prev_a, axis=1),
-                                 np.linalg.norm(readings.b - readings.prev_b, axis=1)))
         self.n = readings.n_contacts
         self.set_sigma(sigma)
 
@@ -244,34 +236,15 @@ class Scorer:
             r, t = residuals_and_touch(h.kind, h.fit.params, self.all_data, h.fit.free_side)
             h.res = self.readings.from_fit_rows(_sides_at_ends_invalid(r, t,
                                                                        self.all_data.n_tip))
-            if self.prev_data is not None:
-                r0, _ = residuals_and_touch(h.kind, h.fit.params, self.prev_data,
-                                            h.fit.free_side)
-                h.approach = self.readings.from_fit_rows(r0 - r)
         return h.res
-
-    def log_joint(self, h: Hypothesis) -> FloatArray:
-        """``log prior + log likelihood`` of every reading under ``h`` (up to a constant).
-
-        A contact obstructs a motion: the surface must have stopped the arm's approach.  A
-        reading whose point moved, over the release time before the contact, by more than
-        the noise can resolve (``2 k_sigma`` sigmas) yet came no closer to the surface than
-        ``k_sigma`` sigmas was moving along it or away from it, and could not have been
-        stopped by it: that reading is impossible under ``h``.  (A tip moving in a plane never
-        touches that plane; a straight arm turning about its shoulder never pushes into the
-        sphere of its reach.)"""
-        z = self.residuals(h) / self.sigma
-        v = self.readings.log_prior - 0.5 * z * z
-        if h.approach is not None:
-            k = self.policy.k_sigma * self.sigma
-            v = np.where((self.moved > 2.0 * k) & ~(h.approach >= k), -np.inf, v)
-        return v
 
     def score(self, h: Hypothesis) -> Hypothesis:
         """Fill ``h.cost`` and ``h.free`` at the current noise level."""
         if h.sigma == self.sigma and h.cost is not None:
             return h
-        v = self.log_joint(h)
+        res = self.residuals(h)
+        z = res / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
         h.cost = self.c_in - _logsumexp_by_contact(v, self.readings.starts)
         h.free = self.free_share(h)
         h.sigma = self.sigma
@@ -279,16 +252,15 @@ class Scorer:
 
     def posterior(self, h: Hypothesis) -> FloatArray:
         """Posterior probability of each reading given that ``h`` explains its contact."""
-        v = self.log_joint(h)
-        lse = _logsumexp_by_contact(v, self.readings.starts)[self.readings.contact]
-        out = np.zeros(len(v))
-        ok = np.isfinite(lse)   # a contact with no possible reading has no posterior here
-        out[ok] = np.exp(v[ok] - lse[ok])
-        return out
+        z = self.residuals(h) / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
+        lse = _logsumexp_by_contact(v, self.readings.starts)
+        return np.exp(v - lse[self.readings.contact])
 
     def best_reading(self, h: Hypothesis) -> IntArray:
         """Each contact's most probable reading under ``h``, ``(M,)`` reading indices."""
-        v = self.log_joint(h)
+        z = self.residuals(h) / self.sigma
+        v = self.readings.log_prior - 0.5 * z * z
         out = np.empty(self.n, dtype=np.int64)
         st = self.readings.starts
         ends = np.r_[st[1:], len(v)]
@@ -778,11 +750,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         """``h`` (or a ``kind`` fitted from scratch) refitted on ``members``, each by its most
         probable reading under ``h`` with its posterior as weight; once per reading set."""
         kind = kind or h.kind
-        best = scorer.best_reading(h)[members]
-        possible = np.isfinite(scorer.log_joint(h)[best])
-        members, best = members[possible], best[possible]
         if len(members) < MODELS[kind].dof + 1:
             return None
+        best = scorer.best_reading(h)[members]
         key_ = (kind, best.tobytes())
         if key_ not in fitted:
             post = scorer.posterior(h)[best]

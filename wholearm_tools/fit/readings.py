@@ -54,8 +54,6 @@ class Readings:
     a, b : (R, d) float, the segment (``a == b`` for a sphere reading)
     radius : (R,) float, ``w``
     n_contacts : int, ``M``
-    prev_a, prev_b : (R, d) float or None, the same segment (or sphere centre) shortly before
-        the contact, as the arm approached it (None: unknown, e.g. a contact table alone)
     """
 
     contact: IntArray
@@ -66,8 +64,6 @@ class Readings:
     b: FloatArray
     radius: FloatArray
     n_contacts: int
-    prev_a: FloatArray | None = None
-    prev_b: FloatArray | None = None
     _starts: IntArray = field(init=False, repr=False, default=None)  # type: ignore[assignment]
     _fit_position: IntArray = field(init=False, repr=False,
                                     default=None)  # type: ignore[assignment]
@@ -94,28 +90,12 @@ class Readings:
             raise InputError("every contact needs at least one reading")
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
-        if (self.prev_a is None) != (self.prev_b is None):
-            raise InputError("give both prev_a and prev_b, or neither")
-        if self.prev_a is not None:
-            pa, pb = _ro(self.prev_a), _ro(self.prev_b)
-            if pa.shape != a.shape or pb.shape != a.shape or not (
-                    np.all(np.isfinite(pa)) and np.all(np.isfinite(pb))):
-                raise InputError(f"expected finite previous segments of shape {a.shape}")
-            object.__setattr__(self, "prev_a", pa)
-            object.__setattr__(self, "prev_b", pb)
         starts = np.flatnonzero(np.r_[True, np.diff(self.contact) > 0]) if r else np.zeros(0, int)
         object.__setattr__(self, "_starts", _ro(starts, np.int64))
         object.__setattr__(self, "_fit_position", self.fit_order(self.sphere))
 
     def __len__(self) -> int:
         return int(self.contact.shape[0])
-
-    def previous(self) -> Readings | None:
-        """The readings as they were shortly before the contacts (None when unknown)."""
-        if self.prev_a is None:
-            return None
-        return Readings(self.contact, self.link, self.sphere, self.log_prior, self.prev_a,
-                        self.prev_b, self.radius, self.n_contacts)
 
     @property
     def dim(self) -> int:
