@@ -11,9 +11,11 @@ diagnostic columns appended, one row per contact in time order:
   ``link_radius``, ``primitive``, ``residual`` (empty before fitting);
 * diagnostics (ignored by the fit): ``contact`` (0-based), ``index`` (log sample),
   ``p_tip_nomap`` (eq. 2 without the map), ``p_tip_swept`` (eq. 1), ``consistent`` (0 when the
-  map left no admissible boundary), ``t_end`` [s], ``q_<joint>`` (configuration at contact,
-  rad), ``qd_<joint>`` (joint velocity just before the stop, rad/s), and for simulated runs
-  ``true_link``, ``true_kind`` (-1 / empty when the detection matches no true contact).
+  map left no admissible boundary), ``t_end`` [s], ``load`` (the largest torque at the stop on
+  the joints up to the link, in detection thresholds: the evidence for the contact),
+  ``q_<joint>`` (configuration at contact, rad), ``qd_<joint>`` (joint velocity just before
+  the stop, rad/s), and for simulated runs ``true_link``, ``true_kind`` (-1 / empty when the
+  detection matches no true contact event).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from cli.options import (
     B_option,
@@ -53,6 +56,7 @@ def column_types(fields: list[str]) -> dict[str, str]:
     types = table_column_types(dim)
     types.update({"contact": "int64", "index": "int64", "p_tip_nomap": "float64",
                   "p_tip_swept": "float64", "consistent": "int64", "t_end": "float64",
+                  "load": "float64",
                   "true_link": "int64", "true_kind": "string"})
     types.update({f: "float64" for f in fields if f.startswith(("q_", "qd_"))})
     return {f: types[f] for f in fields}
@@ -65,7 +69,7 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
     writes them) followed by the diagnostic columns.
     """
     from wholearm_tools.classify import tip_probability
-    from wholearm_tools.contacts import detect_contacts, match_truth
+    from wholearm_tools.contacts import detect_contacts, match_events
     from wholearm_tools.pipeline import contact_table
 
     with stage("detecting contacts"):
@@ -74,9 +78,15 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
         cls = tip_probability(run, contacts, B, causal=causal)
     table = contact_table(run.robot, contacts, cls)
     header, base = table.rows()
-    match = match_truth(contacts, run.truth) if run.truth is not None else None
+    match = match_events(contacts, run.truth) if run.truth is not None else None
     names = run.robot.joint_names
-    extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "t_end",
+    # the evidence: the largest torque at the stop on the joints up to the contact's link, in
+    # units of the detection threshold (what the free-motion model may be wrong by at rest)
+    peak = np.abs(np.asarray(contacts.tau_peak, dtype=float).reshape(len(contacts), -1))
+    ratio = peak / np.maximum(np.asarray(contacts.torque_threshold, dtype=float), 1e-300)
+    upto = np.arange(ratio.shape[1])[None, :] <= np.asarray(contacts.link)[:, None]
+    load = np.where(upto, ratio, 0.0).max(axis=1, initial=0.0)
+    extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "t_end", "load",
              *[f"q_{n}" for n in names], *[f"qd_{n}" for n in names]]
     if match is not None:
         extra += ["true_link", "true_kind"]
@@ -87,7 +97,8 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
             "contact": k, "index": int(contacts.index[k]),
             "p_tip_nomap": f"{cls.p_tip_nomap[k]:.6f}",
             "p_tip_swept": f"{cls.p_tip_swept[k]:.6f}",
-            "consistent": int(cls.consistent[k]), "t_end": f"{contacts.t_end[k]:.6f}"})
+            "consistent": int(cls.consistent[k]), "t_end": f"{contacts.t_end[k]:.6f}",
+            "load": f"{load[k]:.4g}"})
         row.update({f"q_{n}": f"{v:.8g}" for n, v in zip(names, contacts.q[k], strict=True)})
         row.update({f"qd_{n}": f"{v:.6g}" for n, v in zip(names, contacts.qd_before[k],
                                                            strict=True)})
@@ -136,12 +147,14 @@ def command(run: Path, B: float, causal: bool, output: Path | None, rig: RigOpti
                            "output": None if output is None else str(output),
                            "contacts": typed_rows(fields, rows, types)}, indent=2))
     elif output is None:
-        head = f"{'#':>3} {'t [s]':>9} {'link':>4} {'P_T':>6} {'label':<9}"
+        head = (f"{'#':>3} {'t [s]':>9} {'dur s':>6} {'link':>4} {'load':>7} {'P_T':>6} "
+                f"{'label':<9}")
         truth = bool(rows) and "true_link" in rows[0]
         lines = [head + ("  true" if truth else "")]
         for r in rows:
-            line = (f"{r['contact']:>3} {float(r['t']):>9.3f} {r['link']:>4} "
-                    f"{float(r['p_tip']):>6.3f} {r['label']:<9}")
+            dur = float(r["t_end"]) - float(r["t"])
+            line = (f"{r['contact']:>3} {float(r['t']):>9.3f} {dur:>6.2f} {r['link']:>4} "
+                    f"{float(r['load']):>6.1f}x {float(r['p_tip']):>6.3f} {r['label']:<9}")
             if truth:
                 line += f"  {r['true_link']} {r['true_kind']}"
             lines.append(line)

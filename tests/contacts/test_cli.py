@@ -207,3 +207,23 @@ def test_a_truncated_log_is_read_with_a_one_line_warning(mcap: Path, tmp_path: P
     assert "truncated" in warned[0]
     assert ".py:" not in res.stderr  # no source location of the library
     assert json.loads(res.stdout)["contacts"]
+
+
+def test_every_contact_shows_its_evidence(tmp_path):
+    """The printed table gives each contact's duration and its load in detection thresholds
+    (a clear simulated contact is many thresholds over; the CSV carries the number)."""
+    from wholearm_tools.logs import write_run
+    from wholearm_tools.sim.scenarios import load_scenario
+
+    path = tmp_path / "run.mcap"
+    write_run(path, load_scenario("lab_circle").simulate(seed=0, duration=8.0).run)
+    out = CliRunner().invoke(cli, ["contacts", str(path)])
+    assert out.exit_code == 0, out.output
+    head = out.output.splitlines()[0]
+    assert "load" in head
+    assert "dur s" in head
+    table = tmp_path / "c.csv"
+    assert CliRunner().invoke(cli, ["contacts", str(path), "-o", str(table)]).exit_code == 0
+    rows = list(csv.DictReader(table.open()))
+    assert rows
+    assert all(float(r["load"]) > 1.0 for r in rows)
