@@ -25,17 +25,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools._io import write_text_atomic
 from wholearm_tools.errors import InputError
 
 FloatArray = NDArray[np.float64]
 LABELS = ("tip", "link", "ambiguous")
-
-
-def _ro(arr: object, dtype: object = float) -> NDArray:
-    out = np.array(arr, dtype=dtype)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -93,9 +88,9 @@ class ContactTable:
                 "residual": (float, (m,)), "p_tip_map": (float, (m,)),
                 "label_map": (np.str_, (m,)), "link_by_map": (np.int64, (m,))}
         for name, (dtype, shape) in spec.items():
-            arr = _ro(getattr(self, name), dtype)
+            arr = read_only(getattr(self, name), dtype)
             if arr.size == 0 and 0 in shape:
-                arr = _ro(np.zeros(shape), dtype)
+                arr = read_only(np.zeros(shape), dtype)
             if arr.shape != shape:
                 raise InputError(f"expected {name} of shape {shape}, got {arr.shape}")
             object.__setattr__(self, name, arr)

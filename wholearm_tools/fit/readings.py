@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.data import FitData
 
@@ -33,12 +34,6 @@ IntArray = NDArray[np.int64]
 #: tip probabilities are kept this far from 0 and 1: eq. (2) computed from a finite swept map
 #: is never certain, and a reading with prior 0 could not be revised by any evidence
 P_TIP_CLIP = 1e-3
-
-
-def _ro(arr: ArrayLike, dtype: object = float) -> NDArray:
-    out = np.array(arr, dtype=dtype)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -72,11 +67,11 @@ class Readings:
         r = np.asarray(self.contact).shape[0]
         for name, dtype in (("contact", np.int64), ("link", np.int64), ("sphere", bool),
                             ("log_prior", float), ("radius", float)):
-            arr = _ro(getattr(self, name), dtype).reshape(-1)
+            arr = read_only(getattr(self, name), dtype).reshape(-1)
             if arr.shape != (r,):
                 raise InputError(f"expected reading {name} of shape ({r},), got {arr.shape}")
             object.__setattr__(self, name, arr)
-        a, b = _ro(self.a), _ro(self.b)
+        a, b = read_only(self.a), read_only(self.b)
         if a.ndim != 2 or a.shape != b.shape or a.shape[0] != r or a.shape[1] not in (2, 3):
             raise InputError(f"expected reading segments of shape ({r}, 2|3), got {a.shape}, "
                              f"{b.shape}")
@@ -91,7 +86,7 @@ class Readings:
         object.__setattr__(self, "a", a)
         object.__setattr__(self, "b", b)
         starts = np.flatnonzero(np.r_[True, np.diff(self.contact) > 0]) if r else np.zeros(0, int)
-        object.__setattr__(self, "_starts", _ro(starts, np.int64))
+        object.__setattr__(self, "_starts", read_only(starts, np.int64))
         object.__setattr__(self, "_fit_position", self.fit_order(self.sphere))
 
     def __len__(self) -> int:

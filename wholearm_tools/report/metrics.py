@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
 
 FloatArray = NDArray[np.float64]
@@ -69,12 +70,6 @@ def _json(value: Any) -> Any:
         value = float(value)
         return value if math.isfinite(value) else None
     return value
-
-
-def _ro(arr: Any, dtype: Any = float) -> NDArray[Any]:
-    out = np.array(arr, dtype=dtype)
-    out.setflags(write=False)
-    return out
 
 
 # ---------------------------------------------------------------------------------- contacts
@@ -230,9 +225,10 @@ def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any
     return ClassificationMetrics(
         n_detected=m, n_truth=int(truth.n_contacts), n_matched=n_matched,
         n_false=m - n_matched, n_missed=int(truth.n_contacts) - n_matched,
-        truth_index=_ro(idx, np.int64), link_correct=int(np.sum(link[ok] == true_link)),
-        confusion=_ro(confusion, np.int64), bins=_ro(edges), bin_count=_ro(count, np.int64),
-        bin_mean_p=_ro(mean_p), bin_tip_fraction=_ro(frac), brier=brier)
+        truth_index=read_only(idx, np.int64), link_correct=int(np.sum(link[ok] == true_link)),
+        confusion=read_only(confusion, np.int64), bins=read_only(edges),
+        bin_count=read_only(count, np.int64),
+        bin_mean_p=read_only(mean_p), bin_tip_fraction=read_only(frac), brier=brier)
 
 
 # -------------------------------------------------------------------------------- surfaces

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError, RobotModelError
 
 FloatArray = NDArray[np.float64]
@@ -26,12 +27,6 @@ FloatArray = NDArray[np.float64]
 MIN_TIP_DISTANCE = 1e-6
 """Shortest distance [m] from the last joint to the tip: a last link shorter than this has no
 tip to touch with and no axis, and every later stage would divide by its length."""
-
-
-def _readonly(arr: ArrayLike) -> FloatArray:
-    out = np.array(arr, dtype=float)
-    out.setflags(write=False)
-    return out
 
 
 def rotation_about_axis(axis: FloatArray, angle: FloatArray) -> FloatArray:
@@ -110,7 +105,7 @@ class RobotModel:
                 if np.any(norms < 1e-9):
                     raise RobotModelError(f"robot {self.name!r}: a joint axis is zero")
                 value = value / norms[:, None]
-            object.__setattr__(self, attr, _readonly(value))
+            object.__setattr__(self, attr, read_only(value))
         if np.any(self.link_radii < 0) or self.tip_radius < 0:
             raise RobotModelError(f"robot {self.name!r}: negative link or tip radius")
         if float(np.linalg.norm(self.tip_offset)) < MIN_TIP_DISTANCE:

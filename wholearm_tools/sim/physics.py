@@ -58,6 +58,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import GroundTruth, JointLog, Run
 from wholearm_tools.robot.model import RobotModel
@@ -684,8 +685,8 @@ def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
                    "depth": np.array([ev.depth for ev in events], dtype=float)},
     }
     return SimResult(
-        run=run, q_true=_ro(lg.q_true), qd_true=_ro(lg.qd_true),
-        contact_q=_ro(truth.contact_q), moves=tuple(moves), obstacles=collider.obstacles,
+        run=run, q_true=read_only(lg.q_true), qd_true=read_only(lg.qd_true),
+        contact_q=read_only(truth.contact_q), moves=tuple(moves), obstacles=collider.obstacles,
         wall_time=time.perf_counter() - wall0, clearance_evals=collider.n_evals, stats=stats)
 
 
@@ -711,9 +712,3 @@ def _joint_log(robot: RobotModel, lg: _Log, rate: float, sensors: Sensors) -> Jo
     t = np.arange(N) * (1.0 / rate)
     return JointLog(joint_names=robot.joint_names, t=t, q=q, qd=qd, tau_cmd=lg.tau,
                     q_cmd=lg.q_ref, t0_ns=SIM_T0_NS)
-
-
-def _ro(a: FloatArray) -> FloatArray:
-    a = np.array(a)
-    a.setflags(write=False)
-    return a

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import GroundTruth, JointLog, Run
 from wholearm_tools.robot.model import RobotModel
@@ -391,18 +392,12 @@ def simulate(
         progress(duration, duration)
     wall = time.perf_counter() - wall0
     return SimResult(
-        run=run, q_true=_ro(rec.q), qd_true=_ro(rec.qd),
-        contact_q=_ro(np.array([c.q for c in contacts], dtype=float).reshape(-1, n)),
+        run=run, q_true=read_only(rec.q), qd_true=read_only(rec.qd),
+        contact_q=read_only(np.reshape([c.q for c in contacts], (-1, n))),
         moves=tuple(moves), obstacles=collider.obstacles, wall_time=wall,
         clearance_evals=collider.n_evals,
         stats={"moves": len(moves), "swept_fraction": grid.fraction_swept},
     )
-
-
-def _ro(a: FloatArray) -> FloatArray:
-    a = np.array(a)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass
