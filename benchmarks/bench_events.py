@@ -109,16 +109,21 @@ def rate(a: int, b: int) -> float:
     return a / b if b else float("nan")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--engine", default="physics", choices=["physics", "kinematic"])
-    ap.add_argument("--seeds", default="0-2", type=seeds_arg)
-    ap.add_argument("--scenarios", default=",".join(list_scenarios()))
-    ap.add_argument("--duration", type=float, default=None)
+def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
+    """The options :func:`get_run` reads: engine, arm time, physics sweeps, run cache."""
+    ap.add_argument("--engine", default=engine, choices=["physics", "kinematic"])
+    ap.add_argument("--duration", type=float, default=None, help="arm seconds (scenario's)")
     ap.add_argument("--friction", type=float, default=None)
     ap.add_argument("--joint-friction", type=float, default=None)
     ap.add_argument("--gravity", action="store_true")
     ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0-2", type=seeds_arg)
+    ap.add_argument("--scenarios", default=",".join(list_scenarios()))
+    add_run_options(ap, "physics")
     ap.add_argument("--list", action="store_true", help="list missed, false and wrong-link")
     args = ap.parse_args()
     warnings.simplefilter("ignore")

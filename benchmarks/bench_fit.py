@@ -65,7 +65,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "fit"))
-from fit_synth import contacts, param_error, truth
+from fit_synth import contacts, param_error, perturbed, truth
 
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit import FitData, fit_primitive
@@ -167,21 +167,6 @@ class ScipyProblem:
 # --------------------------------------------------------------------------- speed section
 
 
-def _perturb(p: dict[str, Any]) -> dict[str, Any]:
-    """The common start: points moved 2 cm, unit vectors ~3.5 degrees, scalars by 5 %."""
-    q: dict[str, Any] = {}
-    rot = np.array([0.05, -0.03, 0.04])
-    for key, v in p.items():
-        if key in ("normal", "axis", "direction"):
-            u = v + rot[: len(v)]
-            q[key] = u / np.linalg.norm(u)
-        elif np.ndim(v):
-            q[key] = v + 0.02
-        else:
-            q[key] = 1.05 * v
-    return q
-
-
 def _timed(fn: Any) -> tuple[float, float, Any]:
     w0, c0 = time.perf_counter(), time.process_time()
     out = fn()
@@ -210,7 +195,7 @@ def speed(kinds: list[str], sizes: list[int], repeats: int, method: str) -> None
                 n_link = n // 3 if mode == "mixed" else 0
                 data = contacts(kind, p, n - n_link, n_link, 1, rng, w_tip=W_TIP,
                                 w_link=W_LINK, noise=NOISE)
-                p0 = _perturb(p)
+                p0 = perturbed(p)
                 prob = ScipyProblem(kind, p0, data, 1.0)
 
                 def ours(d: FitData = data, k: str = kind, q: dict = p0) -> Any:

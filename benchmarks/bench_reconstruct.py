@@ -137,17 +137,12 @@ def main() -> None:
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from bench_events import get_run, seeds_arg
+    from bench_events import add_run_options, get_run, seeds_arg
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1", help="e.g. 0,1 or 0-9")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
-    ap.add_argument("--engine", choices=("kinematic", "physics"), default="kinematic")
-    ap.add_argument("--duration", type=float, default=None, help="arm seconds (scenario's)")
-    ap.add_argument("--friction", type=float, default=None)
-    ap.add_argument("--joint-friction", type=float, default=None)
-    ap.add_argument("--gravity", action="store_true")
-    ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
+    add_run_options(ap, "kinematic")
     ap.add_argument("--no-tip-only", action="store_true", help="skip the tip-only refit")
     args = ap.parse_args()
     seeds = seeds_arg(args.seeds)

@@ -140,6 +140,22 @@ def contacts(kind: str, p: dict[str, Any], n_tip: int, n_link: int, side: float,
                           dim=q.shape[1])
 
 
+def perturbed(p: dict[str, Any]) -> dict[str, Any]:
+    """A start near the truth ``p``: points moved 2 cm, unit vectors ~3.5 degrees, scalars
+    by 5 %."""
+    q: dict[str, Any] = {}
+    rot = np.array([0.05, -0.03, 0.04])
+    for key, v in p.items():
+        if key in ("normal", "axis", "direction"):
+            u = v + rot[: len(v)]
+            q[key] = u / np.linalg.norm(u)
+        elif np.ndim(v):
+            q[key] = v + 0.02
+        else:
+            q[key] = 1.05 * v
+    return q
+
+
 def param_error(kind: str, fit: dict[str, Any], true: dict[str, Any]) -> float:
     """Largest absolute error of the identifiable quantities (axes up to sign where the sign is
     not meaningful, points on lines/axes compared by distance)."""

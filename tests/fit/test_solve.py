@@ -4,7 +4,7 @@
 import casadi as ca
 import numpy as np
 import pytest
-from fit_synth import contacts, param_error, truth
+from fit_synth import contacts, param_error, perturbed, truth
 
 from wholearm_tools.fit import FitData, core
 from wholearm_tools.fit.codegen import numpy_function
@@ -12,20 +12,6 @@ from wholearm_tools.fit.models import MODELS, signed_distance_np
 from wholearm_tools.fit.solve import follow_links, null_space, solve, symbolic
 
 KINDS = ["line", "circle", "plane", "sphere", "cylinder", "cone", "torus"]
-
-
-def _start(p):
-    """The truth moved: points 2 cm, unit vectors ~3.5 degrees, scalars 5 %."""
-    q = {}
-    for key, v in p.items():
-        if key in ("normal", "axis", "direction"):
-            u = v + np.array([0.05, -0.03, 0.04])[: len(v)]
-            q[key] = u / np.linalg.norm(u)
-        elif np.ndim(v):
-            q[key] = v + 0.02
-        else:
-            q[key] = 1.05 * v
-    return q
 
 
 def _lm(kind, data, start, side):
@@ -87,7 +73,7 @@ def test_noise_free_recovery_through_lm_with_link_contacts(kind, side):
     rng = np.random.default_rng(11)
     p = truth(kind, rng)
     data = contacts(kind, p, 12, 10, side, rng)
-    start = _start(p)
+    start = perturbed(p)
     if kind in ("line", "plane"):  # the initial normal points to free space
         start["normal" if kind == "plane" else "direction"] = (
             side * start["normal"] if kind == "plane" else side * start["direction"])
@@ -109,7 +95,7 @@ def test_lm_and_ipopt_agree_on_the_optimum(kind):
         data = contacts(kind, p, 16, 8, 1, rng, noise=0.003)
         m = MODELS[kind]
         nd = core._normalise(data)
-        th0 = core._raw_from_params(m, _start(p), nd)
+        th0 = core._raw_from_params(m, perturbed(p), nd)
         lm = solve(m, nd, th0, 1.0, "linear", 1.0, 200, core._link_t, core.rho_np,
                    core._irls_weight)
         ip = core._solve(m, nd, th0, 1.0, "linear", 1.0, 200)
@@ -149,7 +135,7 @@ def test_link_points_followed_by_newton_are_the_least_clearance(kind):
     m = MODELS[kind]
     nd = core._normalise(data)
     th = core._raw_from_params(m, p, nd)
-    th_moved = core._raw_from_params(m, _start(p), nd)
+    th_moved = core._raw_from_params(m, perturbed(p), nd)
     # from the contact points of the true primitive, follow to those of the moved one
     _, t0, _ = core._link_t(m, th, 1.0, nd.a, nd.b)
     val, t = follow_links(kind, th_moved, 1.0, nd.a, nd.b, t0)
