@@ -447,7 +447,8 @@ def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike
     return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance, quick=quick)
 
 
-def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, FitResult]]:
+def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
+          ) -> list[tuple[str, IntArray, IntArray, FitResult]]:
     """Hypotheses at one seed contact, per type: its ``dof + 2`` nearest contacts by their most
     probable readings, and the consensus of minimal sets among its ``dof + 2 + seed_extra``
     nearest (RANSAC: near the edge of a surface the nearest contacts mix two, and ambiguous
@@ -470,8 +471,9 @@ def _seed(ctx: _Context, anchor: int) -> list[tuple[str, IntArray, IntArray, Fit
         # the dof + 2 nearest by their prior readings (small, so rarely two surfaces), fitted
         # and polished
         start = np.sort(near[:m.dof + 2])
-        f = fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
-                         max_iter=ctx.max_iter)
+        f = (plain[kind] if plain is not None and kind in plain else
+             fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
+                          max_iter=ctx.max_iter))
         polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
         if polished is not None:
             out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
@@ -612,11 +614,11 @@ def _residuals_of(f: FitResult, rd: Readings, rows: IntArray) -> FloatArray:
     return _sides_at_ends_invalid(r, t, data.n_tip)[Readings.fit_order(rd.sphere[rows])]
 
 
-def _plain(ctx: _Context, anchor: int) -> float:
-    """The best dof-corrected RMS [m] over the simpler types of a fit to the ``dof + 2``
-    contacts nearest ``anchor``, each by its most probable reading (the noise estimate's
-    sample: :func:`_noise_from_seeds`)."""
-    best = math.inf
+def _plain(ctx: _Context, anchor: int) -> dict[str, FitResult]:
+    """Per seeded type, the fit to the ``dof + 2`` contacts nearest ``anchor``, each by its
+    most probable reading: the noise estimate's sample (:func:`_noise_from_seeds`, on the
+    best dof-corrected RMS of each anchor) and the start of the seed there (:func:`_seed`)."""
+    out: dict[str, FitResult] = {}
     for kind in ctx.kinds:
         m = MODELS[kind]
         if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
@@ -624,15 +626,13 @@ def _plain(ctx: _Context, anchor: int) -> float:
         near = np.sort(ctx.order[anchor, :m.dof + 2])
         if len(near) < m.dof + 2:
             continue
-        f = fit_readings(kind, ctx.readings, ctx.prior_best[near], free_points=ctx.free,
-                         max_iter=ctx.max_iter, covariance=False)
-        if f:
-            best = min(best, _rms_dof(f))
-    return best
+        out[kind] = fit_readings(kind, ctx.readings, ctx.prior_best[near],
+                                 free_points=ctx.free, max_iter=ctx.max_iter)
+    return out
 
 
 def _plain_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
-                ) -> list[float]:
+                ) -> list[dict[str, FitResult]]:
     if executor is None or len(anchors) < 2:
         return [_plain(ctx, a) for a in anchors]
     return list(executor.map(_plain, [ctx] * len(anchors), anchors))
@@ -653,12 +653,15 @@ def _noise_from_seeds(best: FloatArray) -> float:
     return pct if pct <= 3.0 * low else low
 
 
-def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None
+def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None,
+               plain: Sequence[dict[str, FitResult] | None] | None = None
                ) -> list[list[tuple[str, IntArray, IntArray, FitResult]]]:
-    """:func:`_seed` at each anchor (in worker processes when given an executor)."""
+    """:func:`_seed` at each anchor (in worker processes when given an executor), from the
+    anchors' :func:`_plain` fits where they were made already."""
+    starts = list(plain) if plain is not None else [None] * len(anchors)
     if executor is None or len(anchors) < 2:
-        return [_seed(ctx, a) for a in anchors]
-    return list(executor.map(_seed, [ctx] * len(anchors), anchors))
+        return [_seed(ctx, a, p) for a, p in zip(anchors, starts, strict=True)]
+    return list(executor.map(_seed, [ctx] * len(anchors), anchors, starts))
 
 
 # --------------------------------------------------------------------------- the loop
@@ -812,15 +815,18 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     # ---- the noise level from plain fits at the seed contacts, then the seeds
     anchors = _farthest(rep, policy.max_seeds, rng)
+    plain: list[dict[str, FitResult]] | None = None
     if policy.noise is None:
         plain = _plain_many(context(sigma, False), anchors, executor)
-        sigma = max(_noise_from_seeds(np.array([p for p in plain if math.isfinite(p)])),
+        best = [min((_rms_dof(f) for f in fits.values() if f), default=math.inf)
+                for fits in plain]
+        sigma = max(_noise_from_seeds(np.array([b for b in best if math.isfinite(b)])),
                     floor)
         scorer.set_sigma(sigma)
         if diagnostics is not None:
-            diagnostics["sigma_seeds"] = (sigma, sorted(plain))
+            diagnostics["sigma_seeds"] = (sigma, sorted(best))
     add(grow_new([make(k, f, mem, rd_, "seed")
-                  for hs in _seed_many(context(sigma, True), anchors, executor)
+                  for hs in _seed_many(context(sigma, True), anchors, executor, plain)
                   for k, mem, rd_, f in hs]))
 
     history: list[float] = []
