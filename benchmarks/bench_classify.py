@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from wholearm_tools.classify import swept_map, tip_probability
-from wholearm_tools.contacts import detect_contacts, match_truth
+from wholearm_tools.contacts import detect_contacts, match_events
 from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
 
@@ -60,7 +60,7 @@ def evaluate(run, B, wrong=None, refine=False):
     cau = tip_probability(run, contacts, B, grid=grid, causal=True)
     secs = time.perf_counter() - t0
     truth = run.truth
-    m = match_truth(contacts, truth)
+    m = match_events(contacts, truth)
     ok = m >= 0
     true_link = np.where(ok, truth.contact_link[np.maximum(m, 0)], -1)
     true_tip = truth.is_tip[np.maximum(m, 0)].astype(float)

@@ -109,7 +109,7 @@ def _torque_line(sources: dict) -> str:
 def _contacts_found(run: Path, info: dict, joint_topic: str | None) -> dict | None:
     """Contacts detected in the log (needs commanded torques; the URDF, when usable, for the
     rigid-group choice); ``None`` when the log has no torques to detect them from."""
-    from wholearm_tools.contacts import detect_contacts, match_truth
+    from wholearm_tools.contacts import detect_contacts, match_events
     from wholearm_tools.errors import WholearmError
     from wholearm_tools.logs import read_joint_log, read_run
 
@@ -132,7 +132,7 @@ def _contacts_found(run: Path, info: dict, joint_topic: str | None) -> dict | No
                                                                             strict=True)},
                  "matched": None, "link_right": None}
     if truth is not None:
-        m = match_truth(c, truth)
+        m = match_events(c, truth)
         ok = m >= 0
         out["matched"] = int(ok.sum())
         out["link_right"] = int(np.sum(np.asarray(c.link)[ok]

@@ -50,7 +50,7 @@ def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
     from wholearm_tools._io import atomic_output
     from wholearm_tools.classify import ClassifyParams, swept_map, tip_probability_history
     from wholearm_tools.classify.swept import check_B
-    from wholearm_tools.contacts import detect_contacts, match_truth
+    from wholearm_tools.contacts import detect_contacts, match_events
     from wholearm_tools.logs import read_run
 
     check_output_file(output, overwrite)
@@ -76,7 +76,7 @@ def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
 
     truth_tip = None
     if data.truth is not None and len(contacts):
-        m = match_truth(contacts, data.truth)
+        m = match_events(contacts, data.truth)
         truth_tip = np.where(m >= 0, data.truth.is_tip[np.maximum(m, 0)], np.nan)
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for k in range(len(contacts)):
