@@ -117,5 +117,4 @@ def _expression(op: int, arg: list[int], vector: dict[int, bool]) -> str:
         return f"{_UNARY[op][0 if vector.get(arg[0], False) else 1]}({a[0]})"
     if op in _BINARY_FN:
         return f"{_BINARY_FN[op][0 if vec else 1]}({a[0]}, {a[1]})"
-    raise ValueError(f"CasADi operation {op} has no numpy translation: add it to _UNARY or "
-                     "_BINARY_FN when a primitive type needs it")
+    raise NotImplementedError(f"CasADi operation {op} has no numpy translation")
