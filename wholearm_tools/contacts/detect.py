@@ -8,10 +8,13 @@ target, unloading on retreat) is learned from the run itself, and a contact is a
 first obstruction until the arm is released, measured where it settles
 (:mod:`wholearm_tools.contacts.events`).
 
-Within a rigid group — joints beyond the obstructed one that were at rest and unloaded, so that
-their links moved as one body with it — the joint signals cannot tell which link touched; the
-group's links share a prior from eq. (2)'s admissible boundary mass and the held joints' loads
-(:func:`_choose_rigid`), which the fitted map later weighs.
+The joints beyond the outermost obstructed one carry no load, but that does not place the
+contact inward of them: a joint at rest moved its links as one body with the obstructed one,
+and a joint that kept moving freely may have moved the contact point along the surface (a push
+across a yaw-pitch arm's plane has no moment about its pitch joints; a tip slides).  Every
+link from the obstructed one outward is a candidate; the candidates share a prior from eq.
+(2)'s admissible boundary mass, counting only boundary points whose push leaves those joints
+unloaded (:func:`_choose_rigid`), and the fitted map later weighs them.
 """
 
 from __future__ import annotations
@@ -65,15 +68,17 @@ class DetectionParams:
     before_time : float
         Window in seconds before the first obstruction over which ``qd_before`` is averaged.
     rigid_outer : bool
-        When the joints beyond the obstructed link were at rest and unloaded (a single-joint
-        move), links ``n..m`` moved as one rigid body and the joint signals cannot tell which
-        touched.  True (default): choose within that group (see ``rigid_choice``); False: keep
-        the innermost link ``n``.
+        The joints beyond the outermost obstructed joint ``n`` carry no load, so links beyond
+        ``n`` may have touched.  True (default): choose among them (see ``rigid_choice``);
+        False: keep the innermost link ``n``.
     rigid_choice : str
-        ``"map"`` (default; needs ``robot``): the link of the group whose dilated boundary
-        sweeps the most admissible space, eq. (2)'s integral over each candidate link with the
-        whole run's swept map (see :func:`_choose_rigid`); ``"outer"``: the outermost link
-        (the map-free prior; also used when no robot is given).
+        ``"map"`` (default; needs ``robot``): every link from ``n`` outward is a candidate; the
+        one whose dilated boundary sweeps the most admissible space, eq. (2)'s integral over
+        each candidate link with the whole run's swept map, counting only points whose push
+        leaves the joints beyond ``n`` unloaded (see :func:`_choose_rigid`); ``"outer"``: the
+        outermost link of the rigid group — joints beyond ``n`` that moved the arm by less
+        than the contact resolution over the event (the map-free prior; also used when no
+        robot is given).
     rigid_dilation : float
         Dilation [m] used by the ``"map"`` choice.
     gravity : bool or None
@@ -245,13 +250,15 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     swept at any time (before or after) cannot hold the surface that stopped it.
 
     Only boundary points consistent with the joint torques count
-    (:func:`torque_consistent`): joints ``lo+1..hi`` were held and carry no load, so a point of
-    link ``k > lo`` counts only where the force predicted there leaves them (nearly) unloaded —
-    it passes through those axes (a roll joint along its link, a push along the link) — and
-    predicts the loads the other held joints show.
+    (:func:`torque_consistent`): joints ``lo+1..hi`` carry no load (held at rest, or moving
+    freely: then their motion moved the contact point along the surface), so a point of link
+    ``k > lo`` counts only where the force predicted there leaves them (nearly) unloaded — it
+    passes through those axes (a roll joint along its link, a push along the link, a push
+    across the plane of pitch joints) — and predicts the loads the held joints show.
 
     ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
-    the stop, commanded torque at the height of the stop, held joints).  Returns the argmax of
+    the stop, commanded torque at the height of the stop, joints that carry no load: held
+    ones and those beyond ``lo``).  Returns the argmax of
     each group (the torque-identified link ``lo`` when no candidate keeps any admissible
     boundary) and ``(G, n)`` each link's share of the group's admissible mass (one-hot at the
     chosen link when none has any): the prior the fitted map later weighs the links with
@@ -572,6 +579,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     held = np.zeros((M, n), dtype=bool)
     links = np.empty(M, dtype=np.int64)
     groups: list[tuple[int, int, int]] = []   # (row, innermost link, outermost link)
+    by_map = params.rigid_choice == "map" and robot is not None
     for i, e in enumerate(events):
         s_, k_ = e.start, e.settle
         settled = q[k_:min(k_ + min_len, e.end)]
@@ -586,27 +594,32 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                                    out_qd[i] != 0, held[i], h1, 5 * nb, fm.scale)
         links[i] = e.link
         if params.rigid_outer:
-            # a joint's travel over the event and the motion that led into it (one release
-            # time before), as rotation: it counts as at rest while the arm beyond it moved by
-            # less than the contact-location resolution (the dilation), or, without a robot,
-            # by less than its velocity noise over that time
-            w0 = max(0, s_ - release)
-            travel = np.sum(np.abs(qd_s[w0:e.end]), axis=0) * dt
-            if robot is not None:
-                arm = np.linalg.norm(robot.joint_positions(out_q[i])[-1]
-                                     - robot.joint_positions(out_q[i])[:-1], axis=1)
-                resolution = params.rigid_dilation / np.maximum(arm, 1e-9)
+            if by_map:
+                m = n - 1      # every link outward; _choose_rigid weighs them
             else:
-                resolution = v_th * (e.end - w0) * dt
-            m = _rigid_group(e.link, travel, resolution, e.obstructed)
+                # a joint's travel over the event and the motion that led into it (one release
+                # time before), as rotation: it counts as at rest while the arm beyond it moved
+                # by less than the contact-location resolution (the dilation), or, without a
+                # robot, by less than its velocity noise over that time
+                w0 = max(0, s_ - release)
+                travel = np.sum(np.abs(qd_s[w0:e.end]), axis=0) * dt
+                if robot is not None:
+                    arm = np.linalg.norm(robot.joint_positions(out_q[i])[-1]
+                                         - robot.joint_positions(out_q[i])[:-1], axis=1)
+                    resolution = params.rigid_dilation / np.maximum(arm, 1e-9)
+                else:
+                    resolution = v_th * (e.end - w0) * dt
+                m = _rigid_group(e.link, travel, resolution, e.obstructed)
             if m > e.link:
                 groups.append((i, e.link, m))
     prior = np.eye(n)[links]
     if groups:
         rows = [g[0] for g in groups]
-        if params.rigid_choice == "map" and robot is not None:
+        if by_map:
+            beyond = np.arange(n)[None, :] > links[rows][:, None]
             chosen, share = _choose_rigid(robot, q, out_q[rows], out_qd[rows], peak[rows],
-                                          held[rows], tau_th, [(g[1], g[2]) for g in groups],
+                                          held[rows] | beyond, tau_th,
+                                          [(g[1], g[2]) for g in groups],
                                           params.rigid_dilation)
             links[rows] = chosen
             prior[rows] = share
