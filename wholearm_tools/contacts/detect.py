@@ -272,10 +272,11 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
     bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
     tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
+    weight = bd.flux * (tmin >= grid.n_samples)
     consistent = torque_consistent(robot, q[rows], bd.x, bd.normal, qd[rows] != 0, held[rows],
                                    tau[rows], tau_tol, cand, B, np.radians(force_angle),
-                                   one_force=True)
-    mass = (bd.flux * (tmin >= grid.n_samples) * consistent).sum(1)
+                                   one_force=True, where=weight > 0)
+    mass = (weight * consistent).sum(1)
     out = []
     share = np.zeros((len(groups), q.shape[1]))
     for g, (lo, _hi) in enumerate(groups):
@@ -292,7 +293,8 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
 def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
                       moving: NDArray[np.bool_], held: NDArray[np.bool_], tau: FloatArray,
                       tau_tol: FloatArray, cand: IntArray, B: float, angle: float,
-                      one_force: bool = False) -> NDArray[np.bool_]:
+                      one_force: bool = False, where: NDArray[np.bool_] | None = None,
+                      ) -> NDArray[np.bool_]:
     """Which dilated-boundary points of link ``cand[r]`` could have made the contact, judged by
     the torques of the held joints.
 
@@ -319,6 +321,8 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     x_bd : (R, Q, d) boundary points; nu : (R, Q, 3) their outward unit normals
     tau_tol : (n,) or (R, n) torque tolerance; cand : (R,) candidate link; B : dilation [m]
     angle : float [rad]
+    where : (R, Q) bool, optional; with ``one_force``, the points to test (the others come out
+        False): the lean test is the costly part, and points no prior weighs need none
 
     Returns
     -------
@@ -355,8 +359,13 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     L = np.where(on_chain[..., None], L, 0.0)
     # held joint i: observed tau_i = -f (g_i + L_i . t)  =>  | f L_i . t - b_i | <= tol_i
     b = -(f[..., None] * g + tau[:, None, :])
-    return _lean_feasible(f[..., None, None] * L, b, np.broadcast_to(tol[:, None, :], b.shape),
-                          np.broadcast_to(held[:, None, :], b.shape), float(np.tan(angle)))
+    test = np.ones((R, Qn), dtype=bool) if where is None else np.asarray(where, dtype=bool)
+    out = np.zeros((R, Qn), dtype=bool)
+    out[test] = _lean_feasible((f[..., None, None] * L)[test], b[test],
+                               np.broadcast_to(tol[:, None, :], b.shape)[test],
+                               np.broadcast_to(held[:, None, :], b.shape)[test],
+                               float(np.tan(angle)))
+    return out
 
 
 def _lean_feasible(A: FloatArray, b: FloatArray, c: FloatArray, use: NDArray[np.bool_],
