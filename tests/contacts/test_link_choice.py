@@ -96,25 +96,24 @@ def test_signature_from_the_unclipped_part_of_the_stop():
 
 
 
-def test_a_side_push_across_the_arms_plane_admits_links_beyond_joints_that_kept_moving():
-    """Yaw-pitch arm stretched along x: a push across its vertical plane (a post beside link 2)
-    has no moment about the pitch joints, so they keep moving freely while the yaw joint is
-    blocked.  Those joints' motion is tangential to the contact; taken as unloaded
-    constraints, they admit the side point of link 2 and reject a point half-way to its top,
-    whose push would load them."""
-    from wholearm_tools.contacts.detect import torque_consistent
+def test_pitch_joints_that_kept_moving_admit_a_side_contact_across_the_arms_plane():
+    """Yaw-pitch arm stretched along x: a post beside link 2 blocks the yaw joint, while the
+    pitch joints keep moving (their motion is tangent to a contact across the arm's vertical
+    plane).  The side point of link 2 is one they move along the surface; a point half-way to
+    the link's top is not (pitching would have pushed it into the surface), nor is a side
+    point when the yaw joint is the one that kept moving."""
+    from wholearm_tools.contacts.detect import moves_along
     from wholearm_tools.sim.scenarios import load_scenario
 
     robot = load_scenario("paper_spatial").robot
     B = 0.02
     r2 = robot.link_radii[2]
-    axis_pt = np.array([0.45, 0.0, 0.12])
     nu = np.array([[[0.0, -1.0, 0.0], [0.0, -np.sqrt(0.5), np.sqrt(0.5)]]])
-    x = axis_pt + (r2 + B) * nu
+    x = np.array([0.45, 0.0, 0.12]) + (r2 + B) * nu
     q = np.zeros((1, 5))
-    moving = np.array([[True, True, True, False, False]])     # yaw blocked, pitch moving on
-    unloaded = np.array([[False, True, True, True, True]])    # every joint beyond the yaw
-    tau = np.array([[-10.0 * 0.45, 0.0, 0.0, 0.0, 0.0]])      # 10 N across the plane
-    ok = torque_consistent(robot, q, x, nu, moving, unloaded, tau, np.full(5, 0.05),
-                           np.array([2]), B, np.radians(20), one_force=True)
+    pitch_moved = np.array([[False, True, True, False, False]])
+    ok = moves_along(robot, q, x, nu, pitch_moved, np.array([2]), B, np.radians(20))
     assert ok.tolist() == [[True, False]]
+    yaw_moved = np.array([[True, False, False, False, False]])
+    ok = moves_along(robot, q, x[:, :1], nu[:, :1], yaw_moved, np.array([2]), B, np.radians(20))
+    assert ok.tolist() == [[False]]

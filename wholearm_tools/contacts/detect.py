@@ -13,8 +13,9 @@ contact inward of them: a joint at rest moved its links as one body with the obs
 and a joint that kept moving freely may have moved the contact point along the surface (a push
 across a yaw-pitch arm's plane has no moment about its pitch joints; a tip slides).  Every
 link from the obstructed one outward is a candidate; the candidates share a prior from eq.
-(2)'s admissible boundary mass, counting only boundary points whose push leaves those joints
-unloaded (:func:`_choose_rigid`), and the fitted map later weighs them.
+(2)'s admissible boundary mass, counting only boundary points that the held joints' torques
+and the moving joints' motion allow (:func:`_choose_rigid`), and the fitted map later weighs
+them.
 """
 
 from __future__ import annotations
@@ -74,8 +75,8 @@ class DetectionParams:
     rigid_choice : str
         ``"map"`` (default; needs ``robot``): every link from ``n`` outward is a candidate; the
         one whose dilated boundary sweeps the most admissible space, eq. (2)'s integral over
-        each candidate link with the whole run's swept map, counting only points whose push
-        leaves the joints beyond ``n`` unloaded (see :func:`_choose_rigid`); ``"outer"``: the
+        each candidate link with the whole run's swept map, counting only points the joints
+        beyond ``n`` allow (see :func:`_choose_rigid`); ``"outer"``: the
         outermost link of the rigid group — joints beyond ``n`` that moved the arm by less
         than the contact resolution over the event (the map-free prior; also used when no
         robot is given).
@@ -240,6 +241,7 @@ def _check_log(log: JointLog) -> None:
 def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: FloatArray,
                   tau: FloatArray, held: NDArray[np.bool_], tau_tol: FloatArray,
                   groups: list[tuple[int, int]], B: float, force_angle: float = 20.0,
+                  moved: NDArray[np.bool_] | None = None,
                   ) -> tuple[list[int], FloatArray]:
     """Link of each rigid group ``lo..hi`` that most likely touched, from geometry, the map and
     the loads on the held joints.
@@ -249,16 +251,19 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     part only) at the contact pose, with ``P_C`` from the whole run's swept map — space the arm
     swept at any time (before or after) cannot hold the surface that stopped it.
 
-    Only boundary points consistent with the joint torques count
-    (:func:`torque_consistent`): joints ``lo+1..hi`` carry no load (held at rest, or moving
-    freely: then their motion moved the contact point along the surface), so a point of link
-    ``k > lo`` counts only where the force predicted there leaves them (nearly) unloaded — it
-    passes through those axes (a roll joint along its link, a push along the link, a push
-    across the plane of pitch joints) — and predicts the loads the held joints show.
+    Only boundary points consistent with the joints beyond ``lo`` count.  A held joint (at
+    rest, unloaded) is judged by its torque (:func:`torque_consistent`): a point of link
+    ``k > lo`` counts only where the force predicted there leaves it (nearly) unloaded — it
+    passes through its axis (a roll joint along its link, a push along the link) — and
+    predicts the loads the held joints show.  A joint that kept moving freely (``moved``) is
+    judged by its motion, which the contact did not stop: it moved the point along the
+    surface, so its velocity there is tangent to the boundary within ``force_angle`` (a push
+    across the plane of pitch joints).  Its torque is not used: while it moves, what the
+    free-motion model misses of the motion is as large as a small contact moment.
 
-    ``q, qd, tau, held`` are ``(G, n)`` (one row per group: configuration, joint velocity before
-    the stop, commanded torque at the height of the stop, joints that carry no load: held
-    ones and those beyond ``lo``).  Returns the argmax of
+    ``q, qd, tau, held, moved`` are ``(G, n)`` (one row per group: configuration, joint
+    velocity before the stop, commanded torque at the height of the stop, held joints, joints
+    beyond ``lo`` that kept moving).  Returns the argmax of
     each group (the torque-identified link ``lo`` when no candidate keeps any admissible
     boundary) and ``(G, n)`` each link's share of the group's admissible mass (one-hot at the
     chosen link when none has any): the prior the fitted map later weighs the links with
@@ -276,6 +281,9 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     consistent = torque_consistent(robot, q[rows], bd.x, bd.normal, qd[rows] != 0, held[rows],
                                    tau[rows], tau_tol, cand, B, np.radians(force_angle),
                                    one_force=True, where=weight > 0)
+    if moved is not None and np.any(moved):
+        consistent &= moves_along(robot, q[rows], bd.x, bd.normal, moved[rows], cand, B,
+                                  np.radians(force_angle))
     mass = (weight * consistent).sum(1)
     out = []
     share = np.zeros((len(groups), q.shape[1]))
@@ -288,6 +296,30 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
             out.append(lo)
             share[g, lo] = 1.0
     return out, share
+
+
+def moves_along(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
+                moved: NDArray[np.bool_], cand: IntArray, B: float, angle: float
+                ) -> NDArray[np.bool_]:
+    """Which dilated-boundary points of link ``cand[r]`` the ``moved`` joints (inward of or at
+    the link) move along the boundary: the point's velocity per unit rate of joint ``j``,
+    ``a_j x (r - o_j)`` at the robot's surface point ``r = x - B nu``, has a normal component
+    within ``sin(angle)`` of its length.  A joint the contact did not stop moved its contact
+    point along the surface.
+
+    ``q, moved : (R, n)``; ``x_bd : (R, Q, d)``; ``nu : (R, Q, 3)``; ``cand : (R,)`` →
+    ``(R, Q) bool``."""
+    n = robot.dof
+    x = np.zeros(nu.shape)
+    x[..., : robot.dim] = x_bd
+    r_pt = x - B * nu
+    pts = robot.joint_positions(q)                    # (R, n+1, 3)
+    axes = robot.joint_axes(q)                        # (R, n, 3)
+    lever = np.cross(axes[:, None, :, :], r_pt[:, :, None, :] - pts[:, None, :n, :])
+    normal_part = np.abs(np.einsum("rqjk,rqk->rqj", lever, nu))
+    along = normal_part <= np.sin(angle) * np.linalg.norm(lever, axis=-1)
+    check = moved[:, None, :] & (np.arange(n)[None, None, :] <= cand[:, None, None])
+    return np.all(along | ~check, axis=-1)
 
 
 def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
@@ -627,9 +659,10 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         if by_map:
             beyond = np.arange(n)[None, :] > links[rows][:, None]
             chosen, share = _choose_rigid(robot, q, out_q[rows], out_qd[rows], peak[rows],
-                                          held[rows] | beyond, tau_th,
+                                          held[rows], tau_th,
                                           [(g[1], g[2]) for g in groups],
-                                          params.rigid_dilation)
+                                          params.rigid_dilation,
+                                          moved=beyond & ~held[rows] & (out_qd[rows] != 0))
             links[rows] = chosen
             prior[rows] = share
         else:
