@@ -298,6 +298,20 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     return out, share
 
 
+def _point_velocities(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
+                      B: float) -> FloatArray:
+    """``a_j x (r - o_j)`` for every joint ``j``: the velocity per unit joint rate of the
+    robot's own surface point ``r = x - B nu`` under each boundary point (and, dotted with a
+    force, its moment about the joint).  ``q (R, n)``, ``x_bd (R, Q, d)``, ``nu (R, Q, 3)``
+    → ``(R, Q, n, 3)``."""
+    x = np.zeros(nu.shape)
+    x[..., : robot.dim] = x_bd
+    r_pt = x - B * nu
+    pts = robot.joint_positions(q)                    # (R, n+1, 3)
+    axes = robot.joint_axes(q)                        # (R, n, 3)
+    return np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :robot.dof, :])
+
+
 def moves_along(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
                 moved: NDArray[np.bool_], cand: IntArray, B: float, angle: float
                 ) -> NDArray[np.bool_]:
@@ -310,12 +324,7 @@ def moves_along(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArr
     ``q, moved : (R, n)``; ``x_bd : (R, Q, d)``; ``nu : (R, Q, 3)``; ``cand : (R,)`` →
     ``(R, Q) bool``."""
     n = robot.dof
-    x = np.zeros(nu.shape)
-    x[..., : robot.dim] = x_bd
-    r_pt = x - B * nu
-    pts = robot.joint_positions(q)                    # (R, n+1, 3)
-    axes = robot.joint_axes(q)                        # (R, n, 3)
-    lever = np.cross(axes[:, None, :, :], r_pt[:, :, None, :] - pts[:, None, :n, :])
+    lever = _point_velocities(robot, q, x_bd, nu, B)
     normal_part = np.abs(np.einsum("rqjk,rqk->rqj", lever, nu))
     along = normal_part <= np.sin(angle) * np.linalg.norm(lever, axis=-1)
     check = moved[:, None, :] & (np.arange(n)[None, None, :] <= cand[:, None, None])
@@ -363,12 +372,7 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     R, Qn = x_bd.shape[:2]
     n = robot.dof
     tol = np.broadcast_to(np.asarray(tau_tol, dtype=float), (R, n))
-    pts = robot.joint_positions(q)                    # (R, n+1, 3)
-    axes = robot.joint_axes(q)                        # (R, n, 3)
-    x = np.zeros((R, Qn, 3))
-    x[..., : robot.dim] = x_bd
-    r_pt = x - B * nu                                 # the robot's own surface point
-    lever = np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :n, :])  # (R, Q, n, 3)
+    lever = _point_velocities(robot, q, x_bd, nu, B)  # (R, Q, n, 3)
     g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
     on_chain = np.arange(n)[None, None, :] <= cand[:, None, None]   # joints that move the link
     g = np.where(on_chain, g, 0.0)
