@@ -9,6 +9,11 @@ first obstruction → release).  Per run:
 * ``events`` true contact events; ``stop`` those that stopped the arm (blocked a commanded
   motion); ``det`` detections;
 * ``recall``: stopping events paired with a detection / ``stop``;
+* ``stops``: the arm's stops against contact (the stopping events that share one settled
+  configuration: the arm can be held by two contacts at once); ``s.rec``: stops with a
+  detection paired to one of their events / ``stops``.  One stop gives one configuration and
+  the joint signals name one link for it, so a stop held by two contacts counts as one
+  detection and one miss in ``recall``;
 * ``prec``: detections paired with a true event (stopping or not) / ``det``;
 * ``link``: paired detections whose link is the true event's link; ``group``: whose true link
   is among the candidates the joint signals leave (a rigid group; the fitted map decides);
@@ -83,6 +88,11 @@ def score(run, B: float) -> dict:
     stopped = np.asarray(truth.contact_stopped, dtype=bool)
     hit = np.zeros(truth.n_contacts, dtype=bool)
     hit[mi[ok]] = True
+    q_true = np.asarray(truth.contact_q)
+    stops: dict[tuple, list[int]] = {}
+    for j in np.flatnonzero(stopped):
+        key = tuple(np.round(q_true[j], 9)) if q_true.shape[1] else (j,)
+        stops.setdefault(key, []).append(int(j))
     true_link = np.where(ok, truth.contact_link[np.maximum(mi, 0)], -1)
     link_ok = ok & (np.asarray(contacts.link) == true_link)
     prior = np.asarray(contacts.link_prior)
@@ -93,6 +103,7 @@ def score(run, B: float) -> dict:
     right = decided & ((lab == "tip") == true_tip)
     return {"events": truth.n_contacts, "stop": int(stopped.sum()), "det": len(contacts),
             "found": int((hit & stopped).sum()), "paired": int(ok.sum()),
+            "stops": len(stops), "stops_found": sum(bool(hit[g].any()) for g in stops.values()),
             "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()),
             "decided": int(decided.sum()),
             "right": int(right.sum()), "amb": int((link_ok & (lab == "ambiguous")).sum()),
@@ -142,15 +153,17 @@ def main() -> None:
                 print(f"    missed {s['missed']}\n    false {s['false']}\n"
                       f"    wrong link {s['wrong_link']}")
     hdr = (f"{'scenario':<14}{'seed':>5}{'events':>7}{'stop':>5}{'det':>5}{'recall':>8}"
-           f"{'prec':>7}{'link':>7}{'group':>7}{'lab':>7}{'amb':>7}")
+           f"{'stops':>6}{'s.rec':>7}{'prec':>7}{'link':>7}{'group':>7}{'lab':>7}{'amb':>7}")
     print("\n" + hdr)
 
     def line(label: str, seed: str, rs: list[dict]) -> str:
         tot = {k: sum(r[k] for r in rs) for k in ("events", "stop", "det", "found", "paired",
                                                  "link_ok", "in_group", "decided", "right",
-                                                 "amb")}
+                                                 "amb", "stops", "stops_found")}
         return (f"{label:<14}{seed:>5}{tot['events']:>7}{tot['stop']:>5}{tot['det']:>5}"
-                f"{rate(tot['found'], tot['stop']):>8.3f}{rate(tot['paired'], tot['det']):>7.3f}"
+                f"{rate(tot['found'], tot['stop']):>8.3f}{tot['stops']:>6}"
+                f"{rate(tot['stops_found'], tot['stops']):>7.3f}"
+                f"{rate(tot['paired'], tot['det']):>7.3f}"
                 f"{rate(tot['link_ok'], tot['paired']):>7.3f}"
                 f"{rate(tot['in_group'], tot['paired']):>7.3f}"
                 f"{rate(tot['right'], tot['decided']):>7.3f}"
@@ -162,7 +175,7 @@ def main() -> None:
     for name in dict.fromkeys(r["scenario"] for r in rows):
         print(line(name, "all", [r for r in rows if r["scenario"] == name]))
     print(line("all", "all", rows))
-    cols = {"recall": ("found", "stop"), "prec": ("paired", "det"),
+    cols = {"recall": ("found", "stop"), "s.rec": ("stops_found", "stops"), "prec": ("paired", "det"),
             "link": ("link_ok", "paired"), "group": ("in_group", "paired"),
             "lab": ("right", "decided"), "amb": ("amb", "link_ok")}
     spread = []

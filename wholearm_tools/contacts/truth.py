@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from numpy.typing import NDArray
 
 from wholearm_tools.contacts.detect import Contacts
@@ -48,9 +49,11 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
     A detection spans ``[t, t_end]`` (first obstruction to release) and a true event
     ``[contact_t, contact_t_end]`` (``min_duration`` long where its end is unknown); they may
     pair when the intervals overlap, or come within ``tol`` seconds of each other (the velocity
-    filter delays a detection's start a little).  Pairs are taken by decreasing overlap, one to
-    one, so a detection that spans two true events (two links obstructed one after the other)
-    matches only one of them, and a second detection within one true event (a contact split in
+    filter delays a detection's start a little).  Pairing is one to one, as many pairs as
+    possible, then the largest total overlap, where a pair whose true event is on the link the
+    detection names counts ``tol`` more: of two contacts held at one stop, the detection
+    measured the one on its link.  So a detection that spans two true events (two links
+    obstructed one after the other) matches only one of them, and a second detection within one true event (a contact split in
     two) matches nothing.
 
     Returns ``(M,) int``.
@@ -66,13 +69,16 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
     de = np.maximum(np.asarray(contacts.t_end, dtype=float), ds)
     overlap = (np.minimum(de[:, None], te[None, :]) - np.maximum(ds[:, None], ts[None, :])
                + tol)
-    # ties (several true events a detection overlaps equally) go to the nearest start
-    key = overlap - 1e-6 * np.abs(ds[:, None] - ts[None, :])
-    pairs = np.argwhere(overlap > 0)
-    order = np.argsort(-key[pairs[:, 0], pairs[:, 1]], kind="stable")
-    used = np.zeros(truth.n_contacts, dtype=bool)
-    for i, j in pairs[order]:
-        if out[i] < 0 and not used[j]:
-            out[i] = j
-            used[j] = True
+    feasible = overlap > 0
+    # as many pairs as possible (each pair's base gain exceeds what overlaps can add up to in
+    # any pairing); among those the largest total overlap, a true event on the link the
+    # detection names counting ``tol`` more; remaining ties go to the nearest start
+    same_link = (np.asarray(contacts.link)[:, None]
+                 == np.asarray(truth.contact_link)[None, :])
+    span = min(overlap.shape) * (float(np.max(overlap)) + 2 * tol) + 1.0
+    gain = np.where(feasible, span + overlap + tol * same_link
+                    - 1e-6 * np.abs(ds[:, None] - ts[None, :]), 0.0)
+    rows, cols = linear_sum_assignment(gain, maximize=True)
+    keep = feasible[rows, cols]
+    out[rows[keep]] = cols[keep]
     return out
