@@ -10,7 +10,10 @@ alone.
 Columns: ``true`` = true surfaces; ``touched`` = surfaces with at least one true contact;
 ``dof-cov`` = touched surfaces whose distinct contacts consistent with them as used (true
 surface residual < 1 mm) reach the type's ``dof + 2`` (what fit-and-grow needs to report a
-primitive: below it the simulator's coverage is the limit, not the fit); ``found`` = touched
+primitive: below it the simulator's coverage is the limit, not the fit); ``det`` = those whose
+consistent contacts also determine the true surface by the report gate's own test, evaluated at
+the truth (``found/det``: found among them; where the contacts do not determine a surface, no
+fit of them may be reported); ``found`` = touched
 surfaces matched by a primitive of the right type; ``off`` = found surfaces none of whose
 primitives is within 5 % of the radius and 5 mm RMS of the surface (found, but wrong in size or
 place); ``extra`` = primitives matched to no
@@ -19,8 +22,8 @@ radius (major radius) error in percent per found curved surface; ``angle`` = axi
 error in degrees; ``srms`` = RMS distance of the fitted surface, sampled over its extent, to the
 true surface [mm].  Times are wall seconds of ``reconstruct`` (detect / classify / fit).
 
-The last table gives the totals per scenario over the seeds (surfaces found / touched /
-enough distinct contacts, off, extra, the largest size error) and the CPU seconds of
+The last table gives the totals per scenario over the seeds (surfaces touched, with enough
+distinct contacts, found, determined by their contacts and found among those, off, extra, the largest size error) and the CPU seconds of
 ``reconstruct`` per run and per contact (one worker, so the figure does not depend on the
 machine's cores).
 
@@ -56,9 +59,10 @@ def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
     return ContactTable(**vals)
 
 
-def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
-    """Distinct detected contacts per true surface (position index) that are consistent with it
-    as the fit uses them (tip or link residual of the true surface below ``tol`` metres)."""
+def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
+    """Per true surface (position index), the distinct detected contacts (one table row per
+    configuration) consistent with it as the fit uses them: tip or link residual of the true
+    surface below ``tol`` metres."""
     from wholearm_tools.fit import residuals
     from wholearm_tools.pipeline import fit_data_from_table
 
@@ -68,27 +72,64 @@ def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
     mi = match_events(rec.contacts, truth)
     table = rec.table
     surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
-    out: dict[int, int] = {}
+    out: dict[int, np.ndarray] = {}
     for i, s in enumerate(surfaces):
         rows = np.flatnonzero(surf == i)
         if len(rows) == 0:
-            out[i] = 0
+            out[i] = rows
             continue
         data, order = fit_data_from_table(table, rows=rows)
         r = residuals(s.kind, s.params, data, float(s.data.get("free_side", 1)))
         good = order[np.abs(r) < tol]
         key = np.round(np.hstack([table.tip_center[good], table.seg_a[good]]) / 1e-4)
-        out[i] = len({tuple(k) for k in key.tolist()})
+        _, first = np.unique(key, axis=0, return_index=True)
+        out[i] = np.sort(good[first])
     return out
 
 
-def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
+def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
+    """Distinct detected contacts per true surface (position index) that are consistent with it
+    as the fit uses them (tip or link residual of the true surface below ``tol`` metres)."""
+    return {i: len(rows) for i, rows in _consistent(rec, tol).items()}
+
+
+def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
+    """Whether each true surface's consistent contacts (:func:`coverage`) determine it by the
+    report gate's own test (:func:`wholearm_tools.fit.gate.report_gate`, at the stated
+    kinematic error of the default policy), evaluated at the true surface: where they do not,
+    no primitive fitted to them could be reported, however well the fit went."""
+    from types import SimpleNamespace
+
+    from wholearm_tools.fit.gate import report_gate
+    from wholearm_tools.fit.policy import FitPolicy
+    from wholearm_tools.pipeline import fit_data_from_table
+
+    policy = FitPolicy()
+    surfaces = true_surfaces(rec.run.truth)
+    sigma_kin = policy.kinematic_error * float(rec.run.robot.reach)
+    out: dict[int, bool] = {}
+    for i, rows in _consistent(rec, tol).items():
+        s = surfaces[i]
+        if len(rows) < MODELS[s.kind].dof + 2:
+            out[i] = False
+            continue
+        data, _ = fit_data_from_table(rec.table, rows=rows)
+        true_fit = SimpleNamespace(kind=s.kind, params=s.params,
+                                   free_side=float(s.data.get("free_side", 1)))
+        out[i] = bool(report_gate(true_fit, data, sigma_kin, policy.max_rel_std))
+    return out
+
+
+def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None = None
+          ) -> dict:
     ev = evaluate(rec)
     surfaces = true_surfaces(rec.run.truth)
     touched = [s for s in ev.surfaces if s.touched]
     enough = [s for i, s in enumerate(ev.surfaces)
               if cov[i] >= MODELS[surfaces[i].kind].dof + 2]
     found = [s for s in ev.surfaces if s.touched and s.found]
+    det = det if det is not None else determined(rec)
+    determinable = [i for i, s in enumerate(ev.surfaces) if det.get(i, False)]
     good = [a for a in ev.primitives if a.type_correct]
     by_id = {a.primitive_id: a for a in ev.primitives}
 
@@ -104,6 +145,9 @@ def score(rec: Reconstruction, cov: dict[int, int]) -> dict:
         "cls_acc_map": cm.class_accuracy if cm else float("nan"),
         "amb_map": cm.ambiguous_fraction if cm else float("nan"),
         "true": len(ev.surfaces), "touched": len(touched), "dof_cov": len(enough),
+        "determined": len(determinable),
+        "found_determined": sum(1 for i in determinable
+                                if ev.surfaces[i].touched and ev.surfaces[i].found),
         "found": len(found), "found_kinds": sorted(s.kind for s in found), "off": len(off),
         "n_prims": len(ev.primitives),
         "extra": sum(1 for a in ev.primitives if not a.type_correct)
@@ -170,11 +214,13 @@ def main() -> None:
 
     print("\n## Primitives found (tip + link data)\n")
     print(f"{'scenario':<14}{'seed':>4}{'arm s':>7}{'cont':>6}{'true':>5}{'touch':>6}"
-          f"{'dofcov':>7}{'found':>6}{'off':>4}{'extra':>6}  {'found types':<34}{'size %':<16}"
+          f"{'dofcov':>7}{'det':>5}{'found':>6}{'off':>4}{'extra':>6}  {'found types':<34}"
+          f"{'size %':<16}"
           f"{'angle deg':<18}{'srms mm':<16}")
     for name, seed, _, dur, n, _, _, b, _, _, _ in rows:
         print(f"{name:<14}{seed:>4}{dur:>7.0f}{n:>6}{b['true']:>5}{b['touched']:>6}"
-              f"{b['dof_cov']:>7}{b['found']:>6}{b['off']:>4}{b['extra']:>6}  "
+              f"{b['dof_cov']:>7}{b['determined']:>5}{b['found']:>6}{b['off']:>4}"
+              f"{b['extra']:>6}  "
               f"{','.join(b['found_kinds']):<34}{_fmt(b['size_pct']):<16}"
               f"{_fmt(b['angle']):<18}{_fmt(b['srms_mm']):<16}")
 
@@ -209,14 +255,16 @@ def main() -> None:
               f"{wj[0][3]:.0f} s of arm time (target: < 30 s for 60 s of arm time, "
               "measured by bench_junction.py --duration 60)")
     print(f"\n## Totals over seeds {args.seeds} ({args.engine})\n")
-    print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'off':>4}"
-          f"{'extra':>6}{'max size %':>11}{'cpu s/run':>10}{'cpu s/contact':>14}")
+    print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'det':>5}"
+          f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'cpu s/run':>10}{'cpu s/contact':>14}")
     for name in dict.fromkeys(r[0] for r in rows):
         rs = [r for r in rows if r[0] == name]
         b = [r[7] for r in rs]
         sizes = [x for bb in b for x in bb["size_pct"]]
         print(f"{name:<14}{len(rs):>5}{sum(x['touched'] for x in b):>8}"
               f"{sum(x['dof_cov'] for x in b):>7}{sum(x['found'] for x in b):>6}"
+              f"{sum(x['determined'] for x in b):>5}"
+              f"{sum(x['found_determined'] for x in b):>10}"
               f"{sum(x['off'] for x in b):>4}{sum(x['extra'] for x in b):>6}"
               f"{max(sizes, default=0.0):>11.3f}{np.mean([x['cpu'] for x in b]):>10.1f}"
               f"{np.mean([x['cpu'] / max(r[4], 1) for x, r in zip(b, rs, strict=True)]):>14.3f}")
