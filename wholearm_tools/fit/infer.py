@@ -748,19 +748,21 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     fitted: dict[tuple[str, bytes], Hypothesis | None] = {}
 
-    def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None
-              ) -> Hypothesis | None:
-        """``h`` (or a ``kind`` fitted from scratch) refitted on ``members``, each by its most
-        probable reading under ``h`` with its posterior as weight; once per reading set."""
+    def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None,
+              cold: bool = False) -> Hypothesis | None:
+        """``h`` (or a ``kind`` fitted from scratch, or with ``cold`` ``h``'s own kind from
+        scratch) refitted on ``members``, each by its most probable reading under ``h`` with
+        its posterior as weight; once per reading set."""
         kind = kind or h.kind
         if len(members) < MODELS[kind].dof + 1:
             return None
         best = scorer.best_reading(h)[members]
-        key_ = (kind, best.tobytes())
+        warm = kind == h.kind and not cold
+        key_ = (kind, warm, best.tobytes())
         if key_ not in fitted:
             post = scorer.posterior(h)[best]
             f = fit_readings(kind, readings, best, np.maximum(post, 0.05),
-                             start=h.fit if kind == h.kind else None, free_points=free)
+                             start=h.fit if warm else None, free_points=free)
             fitted[key_] = make(kind, f, members, best, origin)
         return fitted[key_]
 
@@ -803,12 +805,19 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             out.append(grow(h))
         return out
 
+    def identity(h: Hypothesis) -> tuple[object, ...]:
+        """A hypothesis' contacts, readings and surface (to 10 µm): the same readings fitted
+        on either side of their spheres are two hypotheses."""
+        surface = tuple((name, np.round(np.asarray(v, dtype=float), 5).tobytes())
+                        for name, v in sorted(h.fit.params.items()))
+        return (h.kind, h.members.tobytes(), h.reading.tobytes(), surface)
+
     def add(hs: Sequence[Hypothesis | None]) -> None:
-        seen = {(h.kind, h.members.tobytes(), h.reading.tobytes()) for h in pool}
+        seen = {identity(h) for h in pool}
         for h in hs:
             if h is None:
                 continue
-            k_ = (h.kind, h.members.tobytes(), h.reading.tobytes())
+            k_ = identity(h)
             if k_ not in seen:
                 seen.add(k_)
                 pool.append(h)
@@ -862,9 +871,12 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         extra: list[Hypothesis | None] = []
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
-            for k in kinds:  # the same contacts as every other type (BIC decides)
-                if k != h.kind and len(mem) >= MODELS[k].dof + 2:
-                    extra.append(refit(h, mem, "other type", kind=k))
+            # the same contacts as every other type (BIC decides), and as its own type from
+            # scratch where the robot's sweep cuts it: warm refits keep the free side the seed
+            # took, and a surface fitted on the wrong side of its contacts' spheres is cut
+            for k in kinds:
+                if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
+                    extra.append(refit(h, mem, "other type", kind=k, cold=True))
             for j in range(i + 1, len(chosen)):
                 other = np.flatnonzero(assign == j)
                 if not adj[np.ix_(mem, other)].any():
