@@ -175,7 +175,8 @@ def main() -> None:
     for name in dict.fromkeys(r["scenario"] for r in rows):
         print(line(name, "all", [r for r in rows if r["scenario"] == name]))
     print(line("all", "all", rows))
-    cols = {"recall": ("found", "stop"), "s.rec": ("stops_found", "stops"), "prec": ("paired", "det"),
+    cols = {"recall": ("found", "stop"), "s.rec": ("stops_found", "stops"),
+            "prec": ("paired", "det"),
             "link": ("link_ok", "paired"), "group": ("in_group", "paired"),
             "lab": ("right", "decided"), "amb": ("amb", "link_ok")}
     spread = []

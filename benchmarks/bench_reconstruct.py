@@ -23,9 +23,9 @@ error in degrees; ``srms`` = RMS distance of the fitted surface, sampled over it
 true surface [mm].  Times are wall seconds of ``reconstruct`` (detect / classify / fit).
 
 The last table gives the totals per scenario over the seeds (surfaces touched, with enough
-distinct contacts, found, determined by their contacts and found among those, off, extra, the largest size error) and the CPU seconds of
-``reconstruct`` per run and per contact (one worker, so the figure does not depend on the
-machine's cores).
+distinct contacts, found, determined by their contacts and found among those, off, extra,
+the largest size error) and the CPU seconds of ``reconstruct`` per run and per contact (one
+worker, so the figure does not depend on the machine's cores).
 
 Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0-9] [--scenarios a,b]
       [--engine physics] [--duration 120] [--no-tip-only] [--cache DIR]
@@ -256,7 +256,8 @@ def main() -> None:
               "measured by bench_junction.py --duration 60)")
     print(f"\n## Totals over seeds {args.seeds} ({args.engine})\n")
     print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'det':>5}"
-          f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'cpu s/run':>10}{'cpu s/contact':>14}")
+          f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'cpu s/run':>10}"
+          f"{'cpu s/contact':>14}")
     for name in dict.fromkeys(r[0] for r in rows):
         rs = [r for r in rows if r[0] == name]
         b = [r[7] for r in rs]

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
 
 from wholearm_tools.contacts.detect import Contacts
 from wholearm_tools.logs.records import GroundTruth
@@ -53,8 +53,8 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
     possible, then the largest total overlap, where a pair whose true event is on the link the
     detection names counts ``tol`` more: of two contacts held at one stop, the detection
     measured the one on its link.  So a detection that spans two true events (two links
-    obstructed one after the other) matches only one of them, and a second detection within one true event (a contact split in
-    two) matches nothing.
+    obstructed one after the other) matches only one of them, and a second detection within
+    one true event (a contact split in two) matches nothing.
 
     Returns ``(M,) int``.
     """

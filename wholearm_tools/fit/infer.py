@@ -746,7 +746,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return scorer.score(Hypothesis(kind, fit, np.asarray(members), np.asarray(reading),
                                        origin))
 
-    fitted: dict[tuple[str, bytes], Hypothesis | None] = {}
+    fitted: dict[tuple[str, bool, bytes], Hypothesis | None] = {}
 
     def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None,
               cold: bool = False) -> Hypothesis | None:
@@ -812,8 +812,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         for name, v in sorted(h.fit.params.items()))
         return (h.kind, h.members.tobytes(), h.reading.tobytes(), surface)
 
+    seen: set[tuple[object, ...]] = set()   # identities of the pool's hypotheses
+
     def add(hs: Sequence[Hypothesis | None]) -> None:
-        seen = {identity(h) for h in pool}
         for h in hs:
             if h is None:
                 continue
@@ -876,7 +877,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             # took, and a surface fitted on the wrong side of its contacts' spheres is cut
             for k in kinds:
                 if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
-                    extra.append(refit(h, mem, "other type", kind=k, cold=True))
+                    extra.append(refit(h, mem, "other type" if k != h.kind else "cold refit",
+                                       kind=k, cold=True))
             for j in range(i + 1, len(chosen)):
                 other = np.flatnonzero(assign == j)
                 if not adj[np.ix_(mem, other)].any():
