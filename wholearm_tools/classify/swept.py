@@ -244,7 +244,7 @@ def swept_map(robot: RobotModel, q: ArrayLike, *, B: float | None = None,
         raise InputError(f"margin must be between 0 and the robot's reach ({robot.reach:.3g} "
                          f"m), got {margin!r}")
     dim = robot.dim
-    pts = robot.joint_positions(q)[..., :dim]
+    pts = _joint_positions(robot, q)[..., :dim]
     radii, parts = _robot_parts(robot)
     rmax = float(radii.max()) if radii.size else 0.0
     pad = (margin if margin is not None else (B or 0.0) + rmax) + 1e-9
@@ -274,6 +274,24 @@ _CACHE_SIZE = 2
 
 def _fingerprint(q: FloatArray) -> tuple[object, ...]:
     return (q.shape, hash(np.ascontiguousarray(q).tobytes()))
+
+
+#: joint positions of recently mapped trajectories: each caller asks for the map of the same
+#: log with its own resolution or margin, and the forward kinematics of every sample is the
+#: larger part of finding that a cached map serves
+_POSITIONS: list[tuple[RobotModel, tuple[object, ...], FloatArray]] = []
+
+
+def _joint_positions(robot: RobotModel, q: FloatArray) -> FloatArray:
+    key = _fingerprint(q)
+    for crobot, ckey, pts in _POSITIONS:
+        if crobot is robot and ckey == key:
+            return pts
+    pts = robot.joint_positions(q)
+    pts.setflags(write=False)
+    _POSITIONS.insert(0, (robot, key, pts))
+    del _POSITIONS[_CACHE_SIZE:]
+    return pts
 
 
 def _cache_get(q: FloatArray, robot: RobotModel, res: float, lo: FloatArray, hi: FloatArray
