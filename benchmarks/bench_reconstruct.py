@@ -116,7 +116,8 @@ def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
         data, _ = fit_data_from_table(rec.table, rows=rows)
         true_fit = SimpleNamespace(kind=s.kind, params=s.params,
                                    free_side=float(s.data.get("free_side", 1)))
-        out[i] = bool(report_gate(true_fit, data, sigma_kin, policy.max_rel_std))
+        out[i] = bool(report_gate(true_fit, data, sigma_kin, policy.max_rel_std,
+                                  B=float(rec.params.B)))
     return out
 
 

@@ -294,7 +294,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                                    initial=dict(h.fit.params), free_side=h.fit.free_side)
             if robust:
                 fit = robust
-        gate = report_gate(fit, data, sigma_kin, policy.max_rel_std)
+        gate = report_gate(fit, data, sigma_kin, policy.max_rel_std, B=float(B))
         if not gate:
             messages.append(f"a {h.kind} on {len(members)} contacts not reported: "
                             f"{gate.reason}")

@@ -126,3 +126,50 @@ def test_report_gate_passes_a_well_spread_circle_and_stops_a_pinned_one():
                     max_rel_std=FitPolicy().max_rel_std)
     assert not g
     assert g.pivot == len(ang) - 1 or g.worst_std > FitPolicy().max_rel_std
+
+
+def test_report_gate_needs_the_flat_type_told_from_a_surface_curved_at_b():
+    b = 0.02  # B, the smallest expected curvature radius
+    policy = FitPolicy()
+
+    def tips_on_line(u: np.ndarray) -> FitData:
+        tips = np.c_[u, np.full(len(u), 0.3 + 0.01)]
+        return FitData.create(tips, 0.01, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), 0.01, 1.0,
+                              free_points=np.array([[0.0, 0.0]]), dim=2)
+
+    # a wall touched along 20 cm: flat beyond doubt
+    wide = tips_on_line(np.linspace(-0.1, 0.1, 8))
+    g = report_gate(fit_primitive("line", wide), wide, 3e-4, policy.max_rel_std, B=b)
+    assert g
+    # the same wall touched on a 4 mm patch: a post of radius B fits it as well
+    patch = tips_on_line(np.linspace(-0.002, 0.002, 8))
+    fit = fit_primitive("line", patch)
+    assert report_gate(fit, patch, 3e-4, policy.max_rel_std)          # its line is determined
+    g = report_gate(fit, patch, 3e-4, policy.max_rel_std, B=b)        # its type is not
+    assert not g
+    assert "curved at radius B" in g.reason
+    # two such patches 0.6 m apart: the tangent differs by 0.6 / R between them, so a surface
+    # curved at a radius near B cannot pass through both
+    two = tips_on_line(np.r_[np.linspace(-0.302, -0.298, 4), np.linspace(0.298, 0.302, 4)])
+    assert report_gate(fit_primitive("line", two), two, 3e-4, policy.max_rel_std, B=b)
+
+
+def test_report_gate_stops_a_plane_on_one_strip_up_a_post():
+    # tips in a 4 mm wide strip up the side of a post: a tangent plane fits them, and so does
+    # the post; tips over a 20 x 20 cm patch of a wall are flat beyond doubt
+    rng = np.random.default_rng(0)
+    policy = FitPolicy()
+    free = np.array([[1.0, 0.0, 0.0]])
+
+    def plane_data(y: np.ndarray, z: np.ndarray) -> FitData:
+        tips = np.c_[np.full(len(y), 0.01), y, z]
+        return FitData.create(tips, 0.01, 1.0, np.zeros((0, 3)), np.zeros((0, 3)), 0.01, 1.0,
+                              free_points=free, dim=3)
+
+    strip = plane_data(rng.uniform(-0.002, 0.002, 12), rng.uniform(0.0, 0.4, 12))
+    fit = fit_primitive("plane", strip)
+    assert fit
+    assert report_gate(fit, strip, 3e-4, policy.max_rel_std)
+    assert not report_gate(fit, strip, 3e-4, policy.max_rel_std, B=0.02)
+    patch = plane_data(rng.uniform(-0.1, 0.1, 12), rng.uniform(0.0, 0.2, 12))
+    assert report_gate(fit_primitive("plane", patch), patch, 3e-4, policy.max_rel_std, B=0.02)

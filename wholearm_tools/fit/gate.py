@@ -13,7 +13,15 @@ type).  A primitive reaches the map when
 * it still has without any one of its contacts (the influence of a single contact): every
   contact's reading is inferred (tip or side, which link), so a primitive that one contact
   alone determines rests on one inference, and that contact's residual cannot show whether it
-  is wrong.
+  is wrong;
+* a flat primitive (line, plane) also has its **type** determined: its contacts tell it from a
+  surface curved at the smallest expected radius ``B``.  The flat model is extended by the
+  second-order term of a curved surface through its support, ``1/2 u^T K u`` in the in-plane
+  coordinates ``u`` of the contact points, with the curvature ``K`` in units of ``1/B``; the
+  curvature's marginal standard deviation (every flat parameter free), with every contact and
+  without any one, must also be at most ``max_rel_std``.  Contacts on one small patch, or on
+  one narrow strip of a post (a line of tips up its side), fit a tangent plane as well as the
+  post itself: the type is then not determined, and neither is reported.
 
 The leave-one-out information ``J^T J - j_i^T j_i`` is a rank-one downdate, so the check costs
 no refit.
@@ -49,27 +57,64 @@ class GateResult:
         return not self.reason
 
 
-def information_rows(fit: FitResult, data: FitData) -> tuple[np.ndarray, float]:
-    """Per-contact rows ``(n, dof)`` of the Jacobian on the minimal parameterisation
-    (normalised units: the support's centroid at the origin, unit RMS spread) at ``fit``, and
-    that spread [m]."""
+def _touch_points(fit: FitResult, data: FitData) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Raw parameters and the points where the contacts touch (tip centres, the links' points
+    of least clearance) in normalised units (the support's centroid at the origin, unit RMS
+    spread), and that spread [m]; None for degenerate data."""
     m = MODELS[fit.kind]
     nd = _normalise(data)
     if nd is None:
-        return np.zeros((0, m.dof)), 0.0
+        return None
     th = _raw_from_params(m, fit.params, nd)
     side = float(fit.free_side)
     if m.linear:
         side = 1.0  # lines and planes carry their free side in the normal
     _, t, _ = _link_min(m, th, side, nd.a, nd.b)
     pts = np.vstack([nd.tip, nd.a + t[:, None] * (nd.b - nd.a)]) if len(nd.a) else nd.tip
+    return th, pts, float(nd.scale)
+
+
+def information_rows(fit: FitResult, data: FitData) -> tuple[np.ndarray, float]:
+    """Per-contact rows ``(n, dof)`` of the Jacobian on the minimal parameterisation
+    (normalised units: the support's centroid at the origin, unit RMS spread) at ``fit``, and
+    that spread [m]."""
+    m = MODELS[fit.kind]
+    touch = _touch_points(fit, data)
+    if touch is None:
+        return np.zeros((0, m.dof)), 0.0
+    th, pts, scale = touch
     _, J = sd_and_jacobian(m.kind, th, pts)
-    return J @ tangent_basis(m.kind, th), float(nd.scale)
+    return J @ tangent_basis(m.kind, th), scale
 
 
-def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float
-                ) -> GateResult:
-    """Whether ``fit`` (on ``data``) may be reported: see the module docstring."""
+def curvature_rows(fit: FitResult, data: FitData, B: float) -> np.ndarray:
+    """Per-contact rows ``(n, k)`` of the second-order term ``1/2 u^T K u`` of a surface curved
+    through a flat primitive's contact points (``k = 1`` for a line, ``3`` for a plane: the
+    entries of ``K`` in an orthonormal basis of symmetric matrices, in units of ``1/B``), in the
+    normalised units of :func:`information_rows`; ``(n, 0)`` for a curved type."""
+    m = MODELS[fit.kind]
+    touch = _touch_points(fit, data) if m.linear else None
+    if touch is None:
+        return np.zeros((data.n_contacts, 0))
+    _, pts, scale = touch
+    normal = np.asarray(fit.params["normal" if m.dim == 3 else "direction"], dtype=float)
+    normal = normal / np.linalg.norm(normal)
+    if m.dim == 2:
+        normal = np.array([-normal[1], normal[0]])
+    # an orthonormal basis of the plane (line) normal to it
+    basis = np.linalg.svd(normal[None, :])[2][1:]
+    u = (pts - pts.mean(axis=0)) @ basis.T
+    k = scale / B
+    if m.dim == 2:
+        return k * 0.5 * u ** 2
+    return k * np.stack([0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1] / math.sqrt(2.0),
+                         0.5 * u[:, 1] ** 2], axis=1)
+
+
+def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
+                B: float | None = None) -> GateResult:
+    """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
+    of a flat primitive needs ``B``; None skips it)."""
     rows, scale = information_rows(fit, data)
     n, dof = rows.shape
     if n <= dof or scale <= 0:
@@ -94,6 +139,28 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
         return GateResult(w_all, loo[i], i,
                           "one of its contacts alone determines it: without it, the worst "
                           f"parameter combination is {_fmt(loo[i])} of its support's size")
+    curv = curvature_rows(fit, data, B) if B else np.zeros((n, 0))
+    if curv.shape[1]:
+        full = np.hstack([rows, curv])
+        Hf = full.T @ full
+
+        def worst_curvature(h: np.ndarray) -> float:
+            # the curvature block's Schur complement: its information with the flat
+            # parameters free
+            hff, hfc, hcc = h[:dof, :dof], h[:dof, dof:], h[dof:, dof:]
+            try:
+                schur = hcc - hfc.T @ np.linalg.solve(hff, hfc)
+            except np.linalg.LinAlgError:
+                return math.inf
+            lam = np.linalg.eigvalsh(schur)[0]
+            return s / math.sqrt(lam) if lam > 0 else math.inf
+
+        c_all = worst_curvature(Hf)
+        c_loo = max((worst_curvature(Hf - np.outer(r, r)) for r in full), default=math.inf)
+        if not max(c_all, c_loo) <= max_rel_std:
+            return GateResult(w_all, loo[i], -1,
+                              "its contacts do not tell it from a surface curved at radius B "
+                              f"(curvature known to {_fmt(max(c_all, c_loo))} of 1/B)")
     return GateResult(w_all, loo[i], -1, "")
 
 
