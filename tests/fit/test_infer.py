@@ -173,3 +173,22 @@ def test_report_gate_stops_a_plane_on_one_strip_up_a_post():
     assert not report_gate(fit, strip, 3e-4, policy.max_rel_std, B=0.02)
     patch = plane_data(rng.uniform(-0.1, 0.1, 12), rng.uniform(0.0, 0.2, 12))
     assert report_gate(fit_primitive("plane", patch), patch, 3e-4, policy.max_rel_std, B=0.02)
+
+
+def test_one_wall_touched_on_two_far_patches_is_one_line():
+    """Twelve tips on each of two patches 0.6 m apart along one wall: every contact's nearest
+    neighbours (and every seed's neighbourhood) lie in its own patch, so growth never joins
+    them; the union proposal does, and one line describes both patches more briefly than two
+    (the tips touch the wall y = 0.42 from below)."""
+    rng = np.random.default_rng(4)
+    x = np.r_[rng.uniform(-0.31, -0.29, 12), rng.uniform(0.29, 0.31, 12)]
+    tips = np.c_[x, np.full(24, 0.41)] + rng.normal(0.0, 1e-4, (24, 2)) * [0.0, 1.0]
+    d = FitData.create(tips, 0.01, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), 0.01, 1.0,
+                       free_points=np.array([[0.0, 0.0]]), dim=2)
+    rd, _ = _readings(d, p_tip_tips=0.9)
+    inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4,
+                free_points=d.free_points, rng=0)
+    assert [h.kind for h in inf.selected] == ["line"]
+    assert np.all(inf.assignment == 0)
+    assert param_error("line", inf.selected[0].fit.params,
+                       {"point": np.array([0.0, 0.42]), "direction": np.array([1.0, 0.0])}) < 1e-3

@@ -24,8 +24,9 @@ Bajcsy 1995: fit-and-grow with model selection), scored by one negative log-like
 Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled contacts, each
 neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
-unions of two selected primitives (as either's type or a richer one), every other type on a
-selected one's contacts, and new seeds among the contacts left unexplained.
+unions of two selected primitives (as either's type, and for neighbours as a richer one),
+every other type on a selected one's contacts, and new seeds among the contacts left
+unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
 single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
@@ -881,15 +882,17 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                                        kind=k, cold=True))
             for j in range(i + 1, len(chosen)):
                 other = np.flatnonzero(assign == j)
-                if not adj[np.ix_(mem, other)].any():
-                    continue  # not neighbours: no one surface through both
                 union = np.union1d(mem, other)
-                # the union as each of the pair's types (warm) and as any richer type: two
-                # patches of one surface (the tangent planes of a post touched from two sides)
+                # the union as each of the pair's types (warm), near or far: two patches of
+                # one wall touched far apart (growth only reaches neighbours) ...
                 for hh in (h, chosen[j]):
                     u = refit(hh, union, "union")
                     if u is not None:
                         extra.append(grow(u))
+                if not adj[np.ix_(mem, other)].any():
+                    continue
+                # ... and, for neighbours, as any richer type: two patches of one curved
+                # surface (the tangent planes of a post touched from two sides)
                 richer = max(h.dof, chosen[j].dof)
                 for k in kinds:
                     if k not in (h.kind, chosen[j].kind) and MODELS[k].dof > richer:
