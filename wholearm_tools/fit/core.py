@@ -584,8 +584,12 @@ def _local_hints(nd: _Norm) -> np.ndarray:
     if len(hints) == 0 or len(sup) == 0:
         return hints[:0]
     r = _near_radius(nd.tip_w, nd.link_w, 0.25)
-    d2 = np.min(np.sum((hints[:, None, :] - sup[None, :, :]) ** 2, axis=2), axis=1)
-    return hints[d2 <= r * r]
+    # only hints inside the support's box grown by r can be that near (most of the run's poses
+    # are not): the exact test runs on those
+    box = np.all((hints >= sup.min(axis=0) - r) & (hints <= sup.max(axis=0) + r), axis=1)
+    near = hints[box]
+    d2 = np.min(np.sum((near[:, None, :] - sup[None, :, :]) ** 2, axis=2), axis=1)
+    return near[d2 <= r * r]
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:
