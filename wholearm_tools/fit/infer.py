@@ -25,8 +25,9 @@ Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled 
 neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
 unions of two selected primitives (as either's type, and for neighbours as a richer one),
-every other type on a selected one's contacts, and new seeds among the contacts left
-unexplained.
+every other type on a selected one's contacts, seeds at a selected one's unexplained
+neighbours (among its contacts and the unexplained ones), and new seeds among the contacts
+left unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
 single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
@@ -900,6 +901,22 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         if u is not None:
                             extra.append(grow(u))
         left = np.flatnonzero(assign < 0)
+        # seeds at a selected primitive's unexplained neighbours, among its contacts and the
+        # unexplained ones, as its type: a fit that settled on the wrong member of a tangent
+        # family explains most of a surface's contacts exactly and leaves the rest too far
+        # from it for growth; the consensus of minimal sets through one of those finds the
+        # member through them all
+        for i, h in enumerate(chosen):
+            mem = np.flatnonzero(assign == i)
+            rim = left[adj[np.ix_(left, mem)].any(axis=1)]
+            if len(rim) == 0 or len(mem) < h.dof + 1:
+                continue
+            ctx = replace(context(scorer.sigma, True), kinds=(h.kind,),
+                          order=_restricted_order(order, np.union1d(mem, left)))
+            picks = [int(rim[k]) for k in _farthest(rep[rim], min(2, len(rim)), rng)]
+            extra.extend(grow_new([make(k, f, m_, rd_, "rim seed")
+                                   for hs in _seed_many(ctx, picks, executor)
+                                   for k, m_, rd_, f in hs]))
         n_seeds = min(policy.max_seeds // 2, len(left) // min_need)
         if n_seeds >= 1:
             ctx = replace(context(scorer.sigma, True), order=_restricted_order(order, left))
