@@ -843,6 +843,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     history: list[float] = []
     chosen: list[Hypothesis] = []
+    rim_seeded: set[tuple[str, int]] = set()   # (type, contact) rim seeds made (once each)
     messages: list[str] = []
     for _ in range(policy.rounds):
         for _ in range(policy.em_rounds):
@@ -911,9 +912,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             rim = left[adj[np.ix_(left, mem)].any(axis=1)]
             if len(rim) == 0 or len(mem) < h.dof + 1:
                 continue
+            rim = rim[[(h.kind, int(c)) not in rim_seeded for c in rim]]
+            if len(rim) == 0:
+                continue
             ctx = replace(context(scorer.sigma, True), kinds=(h.kind,),
                           order=_restricted_order(order, np.union1d(mem, left)))
             picks = [int(rim[k]) for k in _farthest(rep[rim], min(2, len(rim)), rng)]
+            rim_seeded.update((h.kind, c) for c in picks)
             extra.extend(grow_new([make(k, f, m_, rd_, "rim seed")
                                    for hs in _seed_many(ctx, picks, executor)
                                    for k, m_, rd_, f in hs]))
