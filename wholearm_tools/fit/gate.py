@@ -36,7 +36,7 @@ import numpy as np
 
 from wholearm_tools.fit.core import _link_min, _normalise, _raw_from_params
 from wholearm_tools.fit.data import FitData
-from wholearm_tools.fit.models import MODELS
+from wholearm_tools.fit.models import MODELS, perp_bases
 from wholearm_tools.fit.result import FitResult
 from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
@@ -74,38 +74,37 @@ def _touch_points(fit: FitResult, data: FitData) -> tuple[np.ndarray, np.ndarray
     return th, pts, float(nd.scale)
 
 
+def _jacobian_rows(kind: str, th: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    _, J = sd_and_jacobian(kind, th, pts)
+    return J @ tangent_basis(kind, th)
+
+
 def information_rows(fit: FitResult, data: FitData) -> tuple[np.ndarray, float]:
     """Per-contact rows ``(n, dof)`` of the Jacobian on the minimal parameterisation
     (normalised units: the support's centroid at the origin, unit RMS spread) at ``fit``, and
     that spread [m]."""
-    m = MODELS[fit.kind]
     touch = _touch_points(fit, data)
     if touch is None:
-        return np.zeros((0, m.dof)), 0.0
+        return np.zeros((0, MODELS[fit.kind].dof)), 0.0
     th, pts, scale = touch
-    _, J = sd_and_jacobian(m.kind, th, pts)
-    return J @ tangent_basis(m.kind, th), scale
+    return _jacobian_rows(fit.kind, th, pts), scale
 
 
-def curvature_rows(fit: FitResult, data: FitData, B: float) -> np.ndarray:
+def _curvature_rows(fit: FitResult, pts: np.ndarray, scale: float, B: float) -> np.ndarray:
     """Per-contact rows ``(n, k)`` of the second-order term ``1/2 u^T K u`` of a surface curved
-    through a flat primitive's contact points (``k = 1`` for a line, ``3`` for a plane: the
-    entries of ``K`` in an orthonormal basis of symmetric matrices, in units of ``1/B``), in the
-    normalised units of :func:`information_rows`; ``(n, 0)`` for a curved type."""
-    m = MODELS[fit.kind]
-    touch = _touch_points(fit, data) if m.linear else None
-    if touch is None:
-        return np.zeros((data.n_contacts, 0))
-    _, pts, scale = touch
-    normal = np.asarray(fit.params["normal" if m.dim == 3 else "direction"], dtype=float)
-    normal = normal / np.linalg.norm(normal)
-    if m.dim == 2:
-        normal = np.array([-normal[1], normal[0]])
-    # an orthonormal basis of the plane (line) normal to it
-    basis = np.linalg.svd(normal[None, :])[2][1:]
-    u = (pts - pts.mean(axis=0)) @ basis.T
+    through a flat primitive's touch points ``pts`` (normalised units, spread ``scale``):
+    ``k = 1`` for a line, ``3`` for a plane (the entries of ``K`` in an orthonormal basis of
+    symmetric matrices), ``K`` in units of ``1/B``."""
+    if MODELS[fit.kind].dim == 2:
+        d = np.asarray(fit.params["direction"], dtype=float)
+        tangents = (d / np.linalg.norm(d))[None]
+    else:
+        nrm = np.asarray(fit.params["normal"], dtype=float)
+        e1, e2 = perp_bases((nrm / np.linalg.norm(nrm))[None])
+        tangents = np.vstack([e1, e2])
+    u = (pts - pts.mean(axis=0)) @ tangents.T
     k = scale / B
-    if m.dim == 2:
+    if len(tangents) == 1:
         return k * 0.5 * u ** 2
     return k * np.stack([0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1] / math.sqrt(2.0),
                          0.5 * u[:, 1] ** 2], axis=1)
@@ -115,7 +114,13 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
                 B: float | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
     of a flat primitive needs ``B``; None skips it)."""
-    rows, scale = information_rows(fit, data)
+    m = MODELS[fit.kind]
+    touch = _touch_points(fit, data)
+    if touch is None:
+        rows, pts, scale = np.zeros((0, m.dof)), None, 0.0
+    else:
+        th, pts, scale = touch
+        rows = _jacobian_rows(m.kind, th, pts)
     n, dof = rows.shape
     if n <= dof or scale <= 0:
         return GateResult(math.inf, math.inf, -1,
@@ -139,28 +144,24 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
         return GateResult(w_all, loo[i], i,
                           "one of its contacts alone determines it: without it, the worst "
                           f"parameter combination is {_fmt(loo[i])} of its support's size")
-    curv = curvature_rows(fit, data, B) if B else np.zeros((n, 0))
-    if curv.shape[1]:
-        full = np.hstack([rows, curv])
-        Hf = full.T @ full
+    if B and m.linear:
+        full = np.hstack([rows, _curvature_rows(fit, pts, scale, B)])
 
         def worst_curvature(h: np.ndarray) -> float:
             # the curvature block's Schur complement: its information with the flat
             # parameters free
             hff, hfc, hcc = h[:dof, :dof], h[:dof, dof:], h[dof:, dof:]
             try:
-                schur = hcc - hfc.T @ np.linalg.solve(hff, hfc)
+                return worst(hcc - hfc.T @ np.linalg.solve(hff, hfc))
             except np.linalg.LinAlgError:
                 return math.inf
-            lam = np.linalg.eigvalsh(schur)[0]
-            return s / math.sqrt(lam) if lam > 0 else math.inf
 
-        c_all = worst_curvature(Hf)
-        c_loo = max((worst_curvature(Hf - np.outer(r, r)) for r in full), default=math.inf)
-        if not max(c_all, c_loo) <= max_rel_std:
+        Hf = full.T @ full
+        c = max(worst_curvature(Hf), *(worst_curvature(Hf - np.outer(r, r)) for r in full))
+        if not c <= max_rel_std:
             return GateResult(w_all, loo[i], -1,
                               "its contacts do not tell it from a surface curved at radius B "
-                              f"(curvature known to {_fmt(max(c_all, c_loo))} of 1/B)")
+                              f"(curvature known to {_fmt(c)} of 1/B)")
     return GateResult(w_all, loo[i], -1, "")
 
 
