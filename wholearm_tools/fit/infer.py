@@ -909,11 +909,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         # member through them all
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
-            rim = left[adj[np.ix_(left, mem)].any(axis=1)]
+            rim = np.array([c for c in left[adj[np.ix_(left, mem)].any(axis=1)]
+                            if (h.kind, int(c)) not in rim_seeded], dtype=np.int64)
             if len(rim) == 0 or len(mem) < h.dof + 1:
-                continue
-            rim = rim[[(h.kind, int(c)) not in rim_seeded for c in rim]]
-            if len(rim) == 0:
                 continue
             ctx = replace(context(scorer.sigma, True), kinds=(h.kind,),
                           order=_restricted_order(order, np.union1d(mem, left)))
