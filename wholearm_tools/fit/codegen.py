@@ -10,7 +10,7 @@ CasADi ``Function.map`` over the points costs about 10 microseconds per point on
 the translated code costs about as much as hand-written numpy.
 
 Only the elementwise operations the models use are supported; anything else raises
-:class:`NotImplementedError` at generation time (never at run time).
+:class:`UntranslatableOperationError` at generation time (never at run time).
 """
 
 from __future__ import annotations
@@ -21,6 +21,12 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+
+
+class UntranslatableOperationError(NotImplementedError):
+    """A CasADi operation the translation has no numpy form for: raised while a function is
+    generated, never while it is evaluated."""
+
 
 _UNARY = {
     ca.OP_SQRT: ("np.sqrt", "math.sqrt"), ca.OP_SIN: ("np.sin", "math.sin"),
@@ -117,4 +123,4 @@ def _expression(op: int, arg: list[int], vector: dict[int, bool]) -> str:
         return f"{_UNARY[op][0 if vector.get(arg[0], False) else 1]}({a[0]})"
     if op in _BINARY_FN:
         return f"{_BINARY_FN[op][0 if vec else 1]}({a[0]}, {a[1]})"
-    raise NotImplementedError(f"CasADi operation {op} has no numpy translation")
+    raise UntranslatableOperationError(f"CasADi operation {op} has no numpy translation")
