@@ -46,7 +46,7 @@ class JointLog:
     Parameters
     ----------
     joint_names : tuple of n str
-    t : (N,) float, seconds since ``t0_ns``, strictly increasing
+    t : (N,) float, seconds since ``t0_ns``, strictly increasing (kept to whole nanoseconds)
     q : (N, n) float, measured joint positions [rad]
     qd : (N, n) float, joint velocities [rad/s] (logged, or differentiated from ``q``)
     tau_cmd : (N, n) float or None, the torque evidence [N m] on the state timestamps: what
@@ -76,6 +76,11 @@ class JointLog:
         t = _frozen(self.t)
         if t.ndim != 1:
             raise InputError(f"expected t of shape (N,), got {t.shape}")
+        # times on the whole-nanosecond grid every log format stamps them on, exactly as
+        # read_run returns them: a run and its MCAP round trip are the same input
+        on_grid = np.round(t * 1e9) * 1e-9
+        if not np.array_equal(on_grid, t, equal_nan=True):
+            t = _frozen(on_grid)
         object.__setattr__(self, "t", t)
         for name in ("q", "qd", "tau_cmd", "q_cmd"):
             value = getattr(self, name)
