@@ -191,8 +191,7 @@ def _boundary(robot: RobotModel, q: FloatArray, qd: FloatArray, link: NDArray[np
     M = q.shape[0]
     dim = robot.dim
     n = robot.dof
-    pts = robot.joint_positions(q)            # (M, n+1, 3)
-    axes = robot.joint_axes(q)                # (M, n, 3)
+    pts, axes = robot.joint_positions_and_axes(q)
     ar = np.arange(M)
     a = pts[ar, link]
     b = pts[ar, link + 1]

@@ -307,8 +307,7 @@ def _point_velocities(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     x = np.zeros(nu.shape)
     x[..., : robot.dim] = x_bd
     r_pt = x - B * nu
-    pts = robot.joint_positions(q)                    # (R, n+1, 3)
-    axes = robot.joint_axes(q)                        # (R, n, 3)
+    pts, axes = robot.joint_positions_and_axes(q)
     return np.cross(axes[:, None], r_pt[:, :, None, :] - pts[:, None, :robot.dof, :])
 
 

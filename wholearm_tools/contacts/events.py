@@ -82,8 +82,7 @@ def gravity_features(robot: RobotModel, q: FloatArray) -> FloatArray:
     """``(N, n, n)``: moment about joint ``j``'s axis of a unit downward force at joint ``k + 1``
     (the tip for the last), for ``k >= j`` (zero below): gravity torques are a linear
     combination of these, weighted by the masses each outer point carries."""
-    pts = robot.joint_positions(q)              # (N, n+1, 3)
-    axes = robot.joint_axes(q)                  # (N, n, 3)
+    pts, axes = robot.joint_positions_and_axes(q)
     n = robot.dof
     down = np.array([0.0, 0.0, -1.0])
     out = np.zeros((q.shape[0], n, n))

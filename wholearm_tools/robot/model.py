@@ -192,28 +192,39 @@ class RobotModel:
         """World transforms of every joint frame after rotation, ``(..., n, 4, 4)``."""
         q = self.check_q(q)
         batch = q.shape[:-1]
-        out = np.empty((*batch, self.dof, 4, 4))
-        current = np.broadcast_to(np.eye(4), (*batch, 4, 4))
+        out = np.zeros((*batch, self.dof, 4, 4))
+        out[..., 3, 3] = 1.0
+        # rotation and translation composed apart: the 3x3 products cost half the 4x4 ones
+        rot = np.broadcast_to(np.eye(3), (*batch, 3, 3))
+        pos = np.zeros((*batch, 3))
         for i in range(self.dof):
-            local = np.broadcast_to(self.origins[i], (*batch, 4, 4)).copy()
-            rot = rotation_about_axis(self.axes[i], q[..., i])
-            local[..., :3, :3] = self.origins[i, :3, :3] @ rot
-            current = current @ local
-            out[..., i, :, :] = current
+            pos = rot @ self.origins[i, :3, 3] + pos
+            rot = rot @ (self.origins[i, :3, :3] @ rotation_about_axis(self.axes[i], q[..., i]))
+            out[..., i, :3, :3] = rot
+            out[..., i, :3, 3] = pos
         return out
 
     def joint_positions(self, q: ArrayLike) -> FloatArray:
         """Joint origins and the tip point, ``(..., n + 1, 3)``; link ``i`` spans rows i, i+1."""
+        return self._positions(self.frames(q))
+
+    def joint_axes(self, q: ArrayLike) -> FloatArray:
+        """Unit joint axes in the base frame, ``(..., n, 3)``."""
+        return self._axes(self.frames(q))
+
+    def joint_positions_and_axes(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:meth:`joint_positions` and :meth:`joint_axes` from one forward kinematics pass."""
         frames = self.frames(q)
+        return self._positions(frames), self._axes(frames)
+
+    def _positions(self, frames: FloatArray) -> FloatArray:
         pts = np.empty((*frames.shape[:-3], self.dof + 1, 3))
         pts[..., : self.dof, :] = frames[..., :3, 3]
         last = frames[..., -1, :, :]
         pts[..., self.dof, :] = last[..., :3, :3] @ self.tip_offset + last[..., :3, 3]
         return pts
 
-    def joint_axes(self, q: ArrayLike) -> FloatArray:
-        """Unit joint axes in the base frame, ``(..., n, 3)``."""
-        frames = self.frames(q)
+    def _axes(self, frames: FloatArray) -> FloatArray:
         return np.einsum("...ij,...j->...i", frames[..., :3, :3], self.axes)
 
     def link_segments(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -235,8 +246,7 @@ class RobotModel:
         """
         q = self.check_q(q)
         qd = self.check_q(qd, "qd")
-        pts = self.joint_positions(q)
-        axes = self.joint_axes(q)
+        pts, axes = self.joint_positions_and_axes(q)
         link = np.asarray(link, dtype=int)
         s = np.asarray(s, dtype=float)
         batch = np.broadcast_shapes(q.shape[:-1], link.shape, s.shape)

@@ -477,8 +477,7 @@ def _contact_loads(rec: _Recorder, robot: RobotModel, K: FloatArray, result: _Mo
         peaks.append(np.nan)
         if k0 > k1 or not blocked.any():
             continue
-        pts = robot.joint_positions(qc)
-        axes = robot.joint_axes(qc)
+        pts, axes = robot.joint_positions_and_axes(qc)
         g = np.cross(axes, info.point - pts[:n]) @ info.normal
         g[joints > link] = 0.0
         gb = g[blocked]

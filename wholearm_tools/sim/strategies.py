@@ -363,8 +363,7 @@ class FrontierStrategy(NoveltyStrategy):
             goal = p0 + d * (step / dist)
         x = q.copy()
         for _ in range(iterations):
-            pts = robot.joint_positions(x)
-            axes = robot.joint_axes(x)
+            pts, axes = robot.joint_positions_and_axes(x)
             p = pts[probe]
             err = goal - p[:dim]
             if np.linalg.norm(err) < 1e-3:
