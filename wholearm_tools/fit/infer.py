@@ -434,17 +434,18 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
                  start: FitResult | None = None, free_points: FloatArray | None = None,
-                 max_iter: int = 200, covariance: bool = True, quick: bool = False
-                 ) -> FitResult:
-    """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given); ``free_points``
-    (robot positions: free space) tell a closed primitive's free side; ``covariance`` False
-    skips the covariance and sensitivity (a proposal that only needs the parameters);
-    ``quick`` starts from the type's quick guess only (a minimal set's hypothesis)."""
+                 max_iter: int = 200, covariance: bool = True, quick: bool = False,
+                 cold: bool = True) -> FitResult:
+    """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given, and from the type's
+    own guesses when that fails unless ``cold`` is False); ``free_points`` (robot positions:
+    free space) tell a closed primitive's free side; ``covariance`` False skips the covariance
+    and sensitivity (a proposal that only needs the parameters); ``quick`` starts from the
+    type's quick guess only (a minimal set's hypothesis)."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
                           max_iter=max_iter, covariance=covariance)
-        if f:
+        if f or not cold:
             return f
     return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance, quick=quick)
 
@@ -532,7 +533,8 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
             anchor: int, ctx: _Context) -> tuple[IntArray, IntArray, FitResult]:
     """A seed fit its contacts do not determine, extended by the next nearest contacts one at a
     time, each refitted from the last solution and kept while the fit stays within 1.5 noise
-    sigmas (dof-corrected), until it is determined.
+    sigmas (dof-corrected), until it is determined.  A contact the warm refit cannot take
+    (no convergence from the last solution) is passed over, never fitted from scratch.
 
     Link contacts from one joint's sweep all lie tangent to a family of primitives (every
     tangent line in one plane touches a whole family of cylinders); a fresh fit to a larger
@@ -548,7 +550,7 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
         cand_reading = np.array([r_best if m_ == c else int(reading[members == m_][0])
                                  for m_ in cand])
         g = fit_readings(kind, rd, cand_reading, start=f, free_points=ctx.free,
-                         max_iter=ctx.max_iter)
+                         max_iter=ctx.max_iter, cold=False)
         if g and _admissible(kind, g, ctx.min_radius, ctx.max_radius_ratio) \
                 and _rms_dof(g) <= 1.5 * ctx.sigma:
             members, reading, f = cand, cand_reading, g
