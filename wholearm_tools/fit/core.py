@@ -546,27 +546,30 @@ def _votes(m: Model, th: np.ndarray, pts: np.ndarray, tol: float) -> tuple[int, 
     return int(np.sum(sd > tol)), int(np.sum(sd < -tol))
 
 
-def _decide_side(m: Model, nd: _Norm, quick: bool = False) -> list[float]:
+def _decide_side(m: Model, nd: _Norm, quick: bool = False
+                 ) -> tuple[list[float], list[np.ndarray] | None]:
     """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
     link axes, which are in free space) all lie clearly on one side of the initial guess;
-    otherwise both, and :func:`_pick_side` decides on the fitted surfaces."""
+    otherwise both, and :func:`_pick_side` decides on the fitted surfaces.  Also the initial
+    guesses made for side +1 on the way (None when none were made), for the fit to reuse."""
     no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
     if no_radius and len(nd.free) == 0:
-        return [1.0]  # sharp tip, no links, no hints: the side does not change the fit
+        return [1.0], None  # sharp tip, no links, no hints: the side does not change the fit
     ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
     init = m.quick_init if quick and m.quick_init else m.init
-    cands = [c for c in init(ctx) if np.all(np.isfinite(c))]
-    if not cands:
-        return [1.0, -1.0]
-    th = min(cands, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
+    cands = init(ctx)
+    finite = [c for c in cands if np.all(np.isfinite(c))]
+    if not finite:
+        return [1.0, -1.0], cands
+    th = min(finite, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
     for pts in (nd.free, np.vstack([nd.a, nd.b])):
         if len(pts) == 0:
             continue
         out, inn = _votes(m, th, pts, 0.05)
         if out + inn == len(pts) and (out == 0 or inn == 0):
-            return [1.0 if out else -1.0]
+            return [1.0 if out else -1.0], cands
         break
-    return [1.0, -1.0]
+    return [1.0, -1.0], cands
 
 
 def _near_radius(tip_w: np.ndarray, link_w: np.ndarray, default: float) -> float:
@@ -739,12 +742,13 @@ def fit_primitive(
                     f"degenerate data for a {kind}: all contact points {shape}")
 
     # lines and planes: the free side is the side the fitted normal points to
+    guesses_plus = None  # the type's initial guesses for side +1, once made
     if m.linear and initial is not None:
         sides = [1.0]  # the initial normal points to free space
     elif free_side is not None and not m.linear:
         sides = [float(free_side)]
     else:
-        sides = _decide_side(m, nd, quick)
+        sides, guesses_plus = _decide_side(m, nd, quick)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
     outliers: dict[float, np.ndarray] = {}
@@ -768,7 +772,8 @@ def fit_primitive(
         if initial is not None:
             cands = [_raw_from_params(m, initial, nd)]
         else:
-            cands = (m.quick_init(ctx) if quick and m.quick_init else m.init(ctx))
+            cands = (guesses_plus if side > 0 and guesses_plus is not None else
+                     m.quick_init(ctx) if quick and m.quick_init else m.init(ctx))
             cands = cands[:1] if quick else cands
         cands = [c for c in cands if np.all(np.isfinite(c))]
         scored = (cands if len(cands) < 2 else
