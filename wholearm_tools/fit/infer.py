@@ -454,8 +454,8 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
           ) -> list[tuple[str, IntArray, IntArray, FitResult]]:
     """Hypotheses at one seed contact, per type: its ``dof + 2`` nearest contacts by their most
     probable readings, and the consensus of minimal sets among its ``dof + 2 + seed_extra``
-    nearest (RANSAC: near the edge of a surface the nearest contacts mix two, and ambiguous
-    contacts are read both ways);
+    nearest (RANSAC, with the first fit as its first hypothesis: near the edge of a surface the
+    nearest contacts mix two, and ambiguous contacts are read both ways);
     each fitted and polished (:func:`_polish`), and extended where not determined
     (:func:`_extend`).  Types with more than five parameters (cone,
     torus) are not seeded: on a seed's few contacts they fit almost any patch and their guesses
@@ -478,34 +478,34 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
              fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
                           max_iter=ctx.max_iter))
         polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
-        if polished is not None:
-            out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
         sel = np.flatnonzero(np.isin(rd.contact, near))
         others = near[near != anchor]
         best_key, best = (-1, -np.inf), None
-        for _ in range(ctx.trials):
-            # a minimal set (dof + 1 contacts, the anchor among them), each by a reading drawn
-            # by its prior, fitted exactly: algebraic guesses from link contacts are too rough
-            pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)), replace=False)]
-            idx = []
-            for c in pick:
-                rs = np.flatnonzero(rd.contact == c)
-                p = np.exp(rd.log_prior[rs])
-                idx.append(int(rng.choice(rs, p=p / p.sum())))
-            g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free, max_iter=20,
-                             covariance=False, quick=True)
-            if not g:
-                continue
-            r = np.abs(_residuals_of(g, rd, sel))
-            best_r = np.full(rd.n_contacts, np.inf)
-            np.minimum.at(best_r, rd.contact[sel], r)
-            inl = near[best_r[near] <= ctx.tol]
-            if anchor not in inl:
-                continue
-            key = (len(inl), -float(np.sum(np.minimum(best_r[near], ctx.tol) ** 2)))
-            if key > best_key:
-                best_key, best = key, (inl, r)
-            if len(inl) == len(near):
+        # the polished fit of the nearest contacts is the consensus search's first hypothesis:
+        # inside a surface it may hold the whole neighbourhood, and no minimal set is drawn
+        g: FitResult | None = None
+        if polished is not None:
+            ext = _extended(kind, rd, *polished, anchor, ctx)
+            out.append((kind, *ext))
+            g = ext[2]
+        for trial in range(ctx.trials + 1):
+            if trial > 0:
+                # a minimal set (dof + 1 contacts, the anchor among them), each by a reading
+                # drawn by its prior, fitted exactly: algebraic guesses from link contacts are
+                # too rough
+                pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)),
+                                                replace=False)]
+                idx = []
+                for c in pick:
+                    rs = np.flatnonzero(rd.contact == c)
+                    p = np.exp(rd.log_prior[rs])
+                    idx.append(int(rng.choice(rs, p=p / p.sum())))
+                g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free, max_iter=20,
+                                 covariance=False, quick=True)
+            found = _consensus(g, rd, sel, near, anchor, ctx.tol) if g else None
+            if found is not None and found[0] > best_key:
+                best_key, best = found[0], found[1:]
+            if best is not None and len(best[0]) == len(near):
                 break
         if best is None or len(best[0]) < m.dof + 2:
             continue
@@ -519,6 +519,20 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
             continue
         out.append((kind, *_extended(kind, rd, *polished, anchor, ctx)))
     return out
+
+
+def _consensus(g: FitResult, rd: Readings, sel: IntArray, near: IntArray, anchor: int,
+               tol: float) -> tuple[tuple[int, float], IntArray, FloatArray] | None:
+    """The contacts of ``near`` within ``tol`` of ``g`` (by their closest reading; rows ``sel``
+    hold their readings), ranked by their count, then by the truncated squared residuals, and
+    the residuals of ``sel``; None unless the ``anchor`` is among them."""
+    r = np.abs(_residuals_of(g, rd, sel))
+    best_r = np.full(rd.n_contacts, np.inf)
+    np.minimum.at(best_r, rd.contact[sel], r)
+    inl = near[best_r[near] <= tol]
+    if anchor not in inl:
+        return None
+    return (len(inl), -float(np.sum(np.minimum(best_r[near], tol) ** 2))), inl, r
 
 
 def _extended(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: FitResult,
