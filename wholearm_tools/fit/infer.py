@@ -329,9 +329,12 @@ class Scorer:
         than it has parameters.  Each sample of its support that the sweep cuts is evidence
         against it as strong as a contact's for it (the cost of leaving a contact
         unexplained)."""
-        n_k = max(len(h.members), 2)
-        return (h.dof * (self.param_cost + 0.5 * self.policy.bic * math.log(n_k))
-                + h.free * self.c_out)
+        return h.dof * self.param_price(len(h.members)) + h.free * self.c_out
+
+    def param_price(self, n_k: int) -> float:
+        """The code length of one parameter of a primitive of ``n_k`` contacts
+        (:meth:`model_cost`)."""
+        return self.param_cost + 0.5 * self.policy.bic * math.log(max(n_k, 2))
 
     def select(self, pool: Sequence[Hypothesis], start: Sequence[Hypothesis] = ()
                ) -> list[Hypothesis]:
@@ -888,13 +891,23 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                     scorer.set_sigma(s_new)
         # ---- further proposals: unions, simpler types, seeds among unexplained contacts
         assign = scorer.assign(chosen)
+        current = np.min([scorer.c_out * np.ones(m_all), *(h.cost for h in chosen)], axis=0)
         extra: list[Hypothesis | None] = []
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
             # the same contacts as every other type (BIC decides), and as its own type from
             # scratch where the robot's sweep cuts it: warm refits keep the free side the seed
-            # took, and a surface fitted on the wrong side of its contacts' spheres is cut
+            # took, and a surface fitted on the wrong side of its contacts' spheres is cut.
+            # A richer type is fitted only where it could pay for its extra parameters: on
+            # these contacts and their neighbours (where its growth goes first) it can at best
+            # explain each exactly (cost c_in) and clear the cut support, a gain of at most
+            # ``bound``
+            near_mem = np.union1d(mem, np.flatnonzero(adj[mem].any(axis=0)))
+            bound = float(np.sum(current[near_mem] - scorer.c_in)) + h.free * scorer.c_out
             for k in kinds:
+                richer = MODELS[k].dof - h.dof
+                if richer > 0 and bound <= richer * scorer.param_price(len(mem)):
+                    continue
                 if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
                     extra.append(refit(h, mem, "other type" if k != h.kind else "cold refit",
                                        kind=k, cold=True))
