@@ -4,6 +4,7 @@
 import numpy as np
 import pytest
 from fit_synth import contacts, param_error, planar_scene
+from fit_synth import truth as fit_synth_truth
 
 from wholearm_tools.fit import FitData, FitPolicy, infer, readings_from_contacts, report_gate
 from wholearm_tools.fit.core import fit_primitive
@@ -192,3 +193,19 @@ def test_one_wall_touched_on_two_far_patches_is_one_line():
     assert np.all(inf.assignment == 0)
     assert param_error("line", inf.selected[0].fit.params,
                        {"point": np.array([0.0, 0.42]), "direction": np.array([1.0, 0.0])}) < 1e-3
+
+
+@pytest.mark.parametrize("kind", ["cone", "torus"])
+def test_a_surface_no_seeded_type_fits_is_selected_as_its_own_richer_type(kind):
+    """Cones and tori are never seeded; they are offered as refits of a selected simpler
+    primitive's contacts, and only where that primitive leaves enough residual for the richer
+    type to pay for its extra parameters: here a cylinder or sphere misses by millimetres."""
+    rng = np.random.default_rng(2)
+    p = fit_synth_truth(kind, rng)
+    d = contacts(kind, p, 60, 0, 1, rng, noise=2e-4)
+    pts = d.tip_points
+    rd = readings_from_contacts(np.zeros(len(pts), int), np.full(len(pts), 0.95), pts,
+                                np.full(len(pts), 0.02), pts, pts, np.full(len(pts), 0.02))
+    inf = infer(rd, B=0.02, noise_floor=1e-4, free_points=d.free_points, rng=0)
+    assert [h.kind for h in inf.selected] == [kind]
+    assert param_error(kind, inf.selected[0].fit.params, p) < 5e-3

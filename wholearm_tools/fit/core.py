@@ -548,10 +548,13 @@ def _votes(m: Model, th: np.ndarray, pts: np.ndarray, tol: float) -> tuple[int, 
 
 def _decide_side(m: Model, nd: _Norm, quick: bool = False
                  ) -> tuple[list[float], list[np.ndarray] | None]:
-    """Free-side candidates.  A single side when the free-space hints (``free_points``, then the
-    link axes, which are in free space) all lie clearly on one side of the initial guess;
-    otherwise both, and :func:`_pick_side` decides on the fitted surfaces.  Also the initial
-    guesses made for side +1 on the way (None when none were made), for the fit to reuse."""
+    """Free-side candidates.  A single side when the free-space hints right behind the contacts
+    (:func:`_local_hints`: robot positions and link axes, which are in free space) all lie
+    clearly on one side of the initial guess; otherwise both, and :func:`_pick_side` decides
+    on the fitted surfaces.  Far hints are not trusted against a guess: an algebraic guess
+    from a patch is good near the patch only, and a hint far from it can lie on either side.
+    Also the initial guesses made for side +1 on the way (None when none were made), for the
+    fit to reuse."""
     no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
     if no_radius and len(nd.free) == 0:
         return [1.0], None  # sharp tip, no links, no hints: the side does not change the fit
@@ -561,14 +564,12 @@ def _decide_side(m: Model, nd: _Norm, quick: bool = False
     finite = [c for c in cands if np.all(np.isfinite(c))]
     if not finite:
         return [1.0, -1.0], cands
-    th = min(finite, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
-    for pts in (nd.free, np.vstack([nd.a, nd.b])):
-        if len(pts) == 0:
-            continue
-        out, inn = _votes(m, th, pts, 0.05)
-        if out + inn == len(pts) and (out == 0 or inn == 0):
+    local = _local_hints(nd)
+    if len(local):
+        th = min(finite, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
+        out, inn = _votes(m, th, local, 0.05)
+        if out + inn == len(local) and (out == 0 or inn == 0):
             return [1.0 if out else -1.0], cands
-        break
     return [1.0, -1.0], cands
 
 
