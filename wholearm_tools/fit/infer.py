@@ -756,7 +756,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return _Context(readings, kinds, rep, prior_best, order, sig,
                         max(30.0 * sig, 1e-3 * extent),
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
-                        policy.consensus_trials, key, free, 30,
+                        policy.consensus_trials, key, free, policy.proposal_iterations,
                         policy.seed_accept if known else math.inf, sigma_id(sig),
                         policy.max_rel_std, policy.seed_extend)
 
@@ -773,7 +773,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
               cold: bool = False) -> Hypothesis | None:
         """``h`` (or a ``kind`` fitted from scratch, or with ``cold`` ``h``'s own kind from
         scratch) refitted on ``members``, each by its most probable reading under ``h`` with
-        its posterior as weight; once per reading set."""
+        its posterior as weight; once per reading set.  A fit from scratch has a seed's
+        iteration budget: a type that does not describe these contacts (a cone on a post's,
+        degenerating towards the cylinder) does not converge, and is not worth finishing."""
         kind = kind or h.kind
         if len(members) < MODELS[kind].dof + 1:
             return None
@@ -783,7 +785,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         if key_ not in fitted:
             post = scorer.posterior(h)[best]
             f = fit_readings(kind, readings, best, np.maximum(post, 0.05),
-                             start=h.fit if warm else None, free_points=free)
+                             start=h.fit if warm else None, free_points=free,
+                             max_iter=200 if warm else policy.proposal_iterations)
             fitted[key_] = make(kind, f, members, best, origin)
         return fitted[key_]
 

@@ -39,6 +39,9 @@ class FitPolicy:
         sigmas (dof-corrected RMS) loses its worst contact, one at a time.
     seed_extend : a seed fit its contacts do not determine (by the report gate's measure) tries
         up to this many further nearest contacts, one at a time.
+    proposal_iterations : solver iterations of every fit a seed makes and of a refit from
+        scratch: a type that does not describe its contacts does not converge in them, and is
+        not worth finishing (refits warm-started from a selected primitive get 200).
     rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
     em_rounds : most assign -> refit -> select iterations.
     neighbours : contacts per contact in the growth graph.
@@ -76,6 +79,7 @@ class FitPolicy:
     seed_accept: float = 2.5
     seed_extend: int = 12
     consensus_trials: int = 12
+    proposal_iterations: int = 30
     rounds: int = 3
     em_rounds: int = 6
     neighbours: int = 6
@@ -93,7 +97,8 @@ class FitPolicy:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number, got {value!r}")
-        for name in ("max_seeds", "consensus_trials", "rounds", "em_rounds", "neighbours"):
+        for name in ("max_seeds", "consensus_trials", "proposal_iterations", "rounds", "em_rounds",
+                     "neighbours"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
         if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):
