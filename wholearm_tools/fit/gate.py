@@ -57,10 +57,11 @@ class GateResult:
         return not self.reason
 
 
-def _touch_points(fit: FitResult, data: FitData) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """Raw parameters and the points where the contacts touch (tip centres, the links' points
-    of least clearance) in normalised units (the support's centroid at the origin, unit RMS
-    spread), and that spread [m]; None for degenerate data."""
+def _touch_rows(fit: FitResult, data: FitData) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Per-contact rows ``(n, dof)`` of the Jacobian on the type's minimal parameterisation at
+    the points where the contacts touch (tip centres, the links' points of least clearance),
+    those points, and the support's RMS spread [m]; all in normalised units (the support's
+    centroid at the origin, unit RMS spread).  None for degenerate data."""
     m = MODELS[fit.kind]
     nd = _normalise(data)
     if nd is None:
@@ -71,23 +72,8 @@ def _touch_points(fit: FitResult, data: FitData) -> tuple[np.ndarray, np.ndarray
         side = 1.0  # lines and planes carry their free side in the normal
     _, t, _ = _link_min(m, th, side, nd.a, nd.b)
     pts = np.vstack([nd.tip, nd.a + t[:, None] * (nd.b - nd.a)]) if len(nd.a) else nd.tip
-    return th, pts, float(nd.scale)
-
-
-def _jacobian_rows(kind: str, th: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    _, J = sd_and_jacobian(kind, th, pts)
-    return J @ tangent_basis(kind, th)
-
-
-def information_rows(fit: FitResult, data: FitData) -> tuple[np.ndarray, float]:
-    """Per-contact rows ``(n, dof)`` of the Jacobian on the minimal parameterisation
-    (normalised units: the support's centroid at the origin, unit RMS spread) at ``fit``, and
-    that spread [m]."""
-    touch = _touch_points(fit, data)
-    if touch is None:
-        return np.zeros((0, MODELS[fit.kind].dof)), 0.0
-    th, pts, scale = touch
-    return _jacobian_rows(fit.kind, th, pts), scale
+    _, J = sd_and_jacobian(m.kind, th, pts)
+    return J @ tangent_basis(m.kind, th), pts, float(nd.scale)
 
 
 def _curvature_rows(fit: FitResult, pts: np.ndarray, scale: float, B: float) -> np.ndarray:
@@ -115,12 +101,8 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
     of a flat primitive needs ``B``; None skips it)."""
     m = MODELS[fit.kind]
-    touch = _touch_points(fit, data)
-    if touch is None:
-        rows, pts, scale = np.zeros((0, m.dof)), None, 0.0
-    else:
-        th, pts, scale = touch
-        rows = _jacobian_rows(m.kind, th, pts)
+    touch = _touch_rows(fit, data)
+    rows, pts, scale = touch if touch is not None else (np.zeros((0, m.dof)), None, 0.0)
     n, dof = rows.shape
     if n <= dof or scale <= 0:
         return GateResult(math.inf, math.inf, -1,

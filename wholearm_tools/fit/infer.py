@@ -311,12 +311,15 @@ class Scorer:
 
     # ---- sets
     def total(self, chosen: Sequence[Hypothesis]) -> float:
+        return (float(np.sum(self.contact_costs(chosen)))
+                + sum(self.model_cost(h) for h in chosen))
+
+    def contact_costs(self, chosen: Sequence[Hypothesis]) -> FloatArray:
+        """Each contact's cost under the best of ``chosen`` (``c_out`` when none explains it)."""
         cur = np.full(self.n, self.c_out)
-        extra = 0.0
         for h in chosen:
             cur = np.minimum(cur, h.cost)
-            extra += self.model_cost(h)
-        return float(np.sum(cur)) + extra
+        return cur
 
     def model_cost(self, h: Hypothesis) -> float:
         """The primitive's own code length and its free-space term.
@@ -894,7 +897,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                     scorer.set_sigma(s_new)
         # ---- further proposals: unions, simpler types, seeds among unexplained contacts
         assign = scorer.assign(chosen)
-        current = np.min([scorer.c_out * np.ones(m_all), *(h.cost for h in chosen)], axis=0)
+        current = scorer.contact_costs(chosen)
         extra: list[Hypothesis | None] = []
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
