@@ -69,7 +69,7 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     truth = rec.run.truth
     surfaces = true_surfaces(truth)
     cs = truth_contact_surfaces(truth, surfaces)
-    mi = match_events(rec.contacts, truth)
+    mi = match_events(rec.contacts, truth, at=rec.run.log.t[rec.contacts.index])
     table = rec.table
     surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
     out: dict[int, np.ndarray] = {}

@@ -78,7 +78,8 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
         cls = tip_probability(run, contacts, B, causal=causal)
     table = contact_table(run.robot, contacts, cls)
     header, base = table.rows()
-    match = match_events(contacts, run.truth) if run.truth is not None else None
+    match = (match_events(contacts, run.truth, at=run.log.t[contacts.index])
+             if run.truth is not None else None)
     names = run.robot.joint_names
     # the evidence: the largest torque at the stop on the joints up to the contact's link, in
     # units of the detection threshold (what the free-motion model may be wrong by at rest)

@@ -41,3 +41,15 @@ def test_a_detection_far_from_every_true_event_stays_unpaired():
     truth = _truth([1.0], [1.4], [1], ["body"])
     det = _contacts([1.05, 5.0], [1.4, 5.3], [1, 1])
     assert match_events(det, truth).tolist() == [0, -1]
+
+
+def test_a_detection_pairs_with_the_contact_on_its_link_held_where_it_measured():
+    # the elbow (link 1) touched at 1.0 s and the arm slid along it; the tip (link 2) stopped
+    # it at 2.3 s, where the detection settled and named link 2.  The elbow's event overlaps the
+    # detection far longer, but the detection measured the tip's contact
+    truth = _truth([1.0, 2.3], [2.8, 2.6], [1, 2], ["body", "tip"])
+    det = _contacts([1.02], [2.8], [2])
+    assert match_events(det, truth).tolist() == [0]
+    assert match_events(det, truth, at=np.array([2.4])).tolist() == [1]
+    # measured before the tip touched: the tip's contact is not what it measured
+    assert match_events(det, truth, at=np.array([2.0])).tolist() == [0]

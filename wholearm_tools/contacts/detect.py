@@ -131,9 +131,9 @@ class Contacts:
     link : (M,) int
         0-based index of the link in contact.
     index : (M,) int
-        Index of that sample in the log.
+        Index in the log of the sample where the contact settled, where ``q`` is measured.
     q : (M, n) float
-        Joint positions at contact (joints ``0..link`` averaged over the first samples of the stop).
+        Joint positions where the contact settled (median over the first samples from there).
     qd_before : (M, n) float
         Joint velocities just before the stop (joints that were already at rest set to 0); the
         motion direction that eq. (2) integrates against.

@@ -43,7 +43,8 @@ def match_truth(contacts: Contacts, truth: GroundTruth, max_lag: float = 0.1,
 
 
 def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
-                 min_duration: float = 0.05) -> NDArray[np.int64]:
+                 min_duration: float = 0.05, at: NDArray[np.float64] | None = None,
+                 ) -> NDArray[np.int64]:
     """Index of the ground-truth contact event each detected contact corresponds to, -1 if none.
 
     A detection spans ``[t, t_end]`` (first obstruction to release) and a true event
@@ -55,6 +56,13 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
     measured the one on its link.  So a detection that spans two true events (two links
     obstructed one after the other) matches only one of them, and a second detection within
     one true event (a contact split in two) matches nothing.
+
+    ``at`` (``(M,)``, optional) is when each detection measured its configuration (the sample
+    it settled at, ``log.t[contacts.index]``).  A detection is a reading "link ``l`` touched
+    at this configuration": a true event on link ``l`` that was in contact then (within
+    ``tol``) is the one it measured, and that pair comes before any difference of overlap —
+    the arm is often held by a second contact that began earlier and overlaps the detection
+    longer (a body contact the arm slid along before the tip stopped it).
 
     Returns ``(M,) int``.
     """
@@ -75,8 +83,13 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
     # detection names counting ``tol`` more; remaining ties go to the nearest start
     same_link = (np.asarray(contacts.link)[:, None]
                  == np.asarray(truth.contact_link)[None, :])
-    span = min(overlap.shape) * (float(np.max(overlap)) + 2 * tol) + 1.0
-    gain = np.where(feasible, span + overlap + tol * same_link
+    measured = np.zeros_like(same_link)
+    if at is not None:
+        ta = np.asarray(at, dtype=float)[:, None]
+        measured = same_link & (ts[None, :] - tol <= ta) & (ta <= te[None, :] + tol)
+    bonus = float(np.max(overlap)) + tol      # more than any difference of overlap
+    span = min(overlap.shape) * (float(np.max(overlap)) + 2 * tol + bonus) + 1.0
+    gain = np.where(feasible, span + overlap + tol * same_link + bonus * measured
                     - 1e-6 * np.abs(ds[:, None] - ts[None, :]), 0.0)
     rows, cols = linear_sum_assignment(gain, maximize=True)
     keep = feasible[rows, cols]
