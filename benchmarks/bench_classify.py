@@ -60,7 +60,7 @@ def evaluate(run, B, wrong=None, refine=False):
     cau = tip_probability(run, contacts, B, grid=grid, causal=True)
     secs = time.perf_counter() - t0
     truth = run.truth
-    m = match_events(contacts, truth, at=run.log.t[contacts.index])
+    m = match_events(contacts, truth)
     ok = m >= 0
     true_link = np.where(ok, truth.contact_link[np.maximum(m, 0)], -1)
     true_tip = truth.is_tip[np.maximum(m, 0)].astype(float)

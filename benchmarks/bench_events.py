@@ -83,7 +83,7 @@ def score(run, B: float) -> dict:
     contacts = detect_contacts(run.log, run.robot)
     cls = tip_probability(run, contacts, B)
     truth = run.truth
-    mi = match_events(contacts, truth, at=run.log.t[contacts.index])
+    mi = match_events(contacts, truth)
     ok = mi >= 0
     stopped = np.asarray(truth.contact_stopped, dtype=bool)
     hit = np.zeros(truth.n_contacts, dtype=bool)

@@ -69,7 +69,7 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     truth = rec.run.truth
     surfaces = true_surfaces(truth)
     cs = truth_contact_surfaces(truth, surfaces)
-    mi = match_events(rec.contacts, truth, at=rec.run.log.t[rec.contacts.index])
+    mi = match_events(rec.contacts, truth)
     table = rec.table
     surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
     out: dict[int, np.ndarray] = {}
@@ -145,6 +145,7 @@ def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None 
         "link_acc_map": cm.link_accuracy if cm else float("nan"),
         "cls_acc_map": cm.class_accuracy if cm else float("nan"),
         "amb_map": cm.ambiguous_fraction if cm else float("nan"),
+        "cls_counts": [_counts(c), _counts(cm) if cm else [0] * 5],
         "true": len(ev.surfaces), "touched": len(touched), "dof_cov": len(enough),
         "determined": len(determinable),
         "found_determined": sum(1 for i in determinable
@@ -158,6 +159,13 @@ def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None 
         "srms_mm": [1e3 * a.surface_rms for a in good if a.surface_rms is not None],
         "coverage": {f"{surfaces[i].kind}{surfaces[i].id}": c for i, c in cov.items()},
     }
+
+
+def _counts(c) -> list[int]:
+    """Paired, on the right link, labels decided, decided right, left ambiguous."""
+    conf = np.asarray(c.confusion)
+    return [c.n_matched, c.link_correct, int(conf[:, :2].sum()), int(conf[0, 0] + conf[1, 1]),
+            int(conf[:, 2].sum())]
 
 
 def tip_only(rec: Reconstruction) -> Reconstruction:
@@ -233,6 +241,16 @@ def main() -> None:
         print(f"{name:<14}{seed:>4}{100 * b['link_acc']:>8.1f}{100 * b['cls_acc']:>13.1f}"
               f"{100 * b['amb']:>11.1f}{100 * b['link_acc_map']:>12.1f}"
               f"{100 * b['cls_acc_map']:>13.1f}{100 * b['amb_map']:>11.1f}")
+    print("-" * 82)
+    for name in [*dict.fromkeys(r[0] for r in rows), "all"]:
+        tot = np.sum([r[7]["cls_counts"] for r in rows if name in ("all", r[0])], axis=0)
+
+        def pct(a: int, b: int) -> float:
+            return 100.0 * a / b if b else float("nan")
+
+        print(f"{name:<14}{'all':>4}"
+              + "".join(f"{pct(t[1], t[0]):>{w1}.1f}{pct(t[3], t[2]):>13.1f}"
+                        f"{pct(t[4], t[0]):>11.1f}" for t, w1 in ((tot[0], 8), (tot[1], 12))))
 
     print("\n## Value of link data: tip contacts only vs tip + link\n")
     print(f"{'scenario':<14}{'seed':>4}  {'found tip|both':<15}{'extra tip|both':<15}"

@@ -55,7 +55,7 @@ def column_types(fields: list[str]) -> dict[str, str]:
     dim = 3 if "tip_z" in fields else 2
     types = table_column_types(dim)
     types.update({"contact": "int64", "index": "int64", "p_tip_nomap": "float64",
-                  "p_tip_swept": "float64", "consistent": "int64", "t_end": "float64",
+                  "p_tip_swept": "float64", "consistent": "int64",
                   "load": "float64",
                   "true_link": "int64", "true_kind": "string"})
     types.update({f: "float64" for f in fields if f.startswith(("q_", "qd_"))})
@@ -78,8 +78,7 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
         cls = tip_probability(run, contacts, B, causal=causal)
     table = contact_table(run.robot, contacts, cls)
     header, base = table.rows()
-    match = (match_events(contacts, run.truth, at=run.log.t[contacts.index])
-             if run.truth is not None else None)
+    match = match_events(contacts, run.truth) if run.truth is not None else None
     names = run.robot.joint_names
     # the evidence: the largest torque at the stop on the joints up to the contact's link, in
     # units of the detection threshold (what the free-motion model may be wrong by at rest)
@@ -87,7 +86,7 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
     ratio = peak / np.maximum(np.asarray(contacts.torque_threshold, dtype=float), 1e-300)
     upto = np.arange(ratio.shape[1])[None, :] <= np.asarray(contacts.link)[:, None]
     load = np.where(upto, ratio, 0.0).max(axis=1, initial=0.0)
-    extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "t_end", "load",
+    extra = ["contact", "index", "p_tip_nomap", "p_tip_swept", "consistent", "load",
              *[f"q_{n}" for n in names], *[f"qd_{n}" for n in names]]
     if match is not None:
         extra += ["true_link", "true_kind"]
@@ -98,8 +97,7 @@ def contact_rows(run: Any, B: float, causal: bool) -> tuple[list[str], list[dict
             "contact": k, "index": int(contacts.index[k]),
             "p_tip_nomap": f"{cls.p_tip_nomap[k]:.6f}",
             "p_tip_swept": f"{cls.p_tip_swept[k]:.6f}",
-            "consistent": int(cls.consistent[k]), "t_end": f"{contacts.t_end[k]:.6f}",
-            "load": f"{load[k]:.4g}"})
+            "consistent": int(cls.consistent[k]), "load": f"{load[k]:.4g}"})
         row.update({f"q_{n}": f"{v:.8g}" for n, v in zip(names, contacts.q[k], strict=True)})
         row.update({f"qd_{n}": f"{v:.6g}" for n, v in zip(names, contacts.qd_before[k],
                                                            strict=True)})

@@ -132,7 +132,7 @@ def _contacts_found(run: Path, info: dict, joint_topic: str | None) -> dict | No
                                                                             strict=True)},
                  "matched": None, "link_right": None}
     if truth is not None:
-        m = match_events(c, truth, at=log.t[c.index])
+        m = match_events(c, truth)
         ok = m >= 0
         out["matched"] = int(ok.sum())
         out["link_right"] = int(np.sum(np.asarray(c.link)[ok]

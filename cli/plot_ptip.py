@@ -76,7 +76,7 @@ def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
 
     truth_tip = None
     if data.truth is not None and len(contacts):
-        m = match_events(contacts, data.truth, at=data.log.t[contacts.index])
+        m = match_events(contacts, data.truth)
         truth_tip = np.where(m >= 0, data.truth.is_tip[np.maximum(m, 0)], np.nan)
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for k in range(len(contacts)):

@@ -239,12 +239,12 @@ def test_same_input_gives_the_same_map():
 
 def test_map_refined_labels_are_right_and_leave_fewer_ambiguous(short_lab_run):
     """The fitted map resolves contacts eq. (2) left ambiguous, without mislabelling."""
+    from wholearm_tools.contacts import pair_events
     from wholearm_tools.pipeline import reconstruct
-    from wholearm_tools.report.metrics import match_contacts
 
     run, _ = short_lab_run
     table = reconstruct(run, B=0.02).table
-    m = np.asarray(match_contacts(table.t, run.truth))
+    m = pair_events(table.t, table.t_end, table.link, run.truth, at=table.t_settle)
     ok = (m >= 0) & (table.link == run.truth.contact_link[np.maximum(m, 0)])
     truth_tip = run.truth.is_tip[np.maximum(m, 0)]
     decided = ok & (table.label_map != "ambiguous")

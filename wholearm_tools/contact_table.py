@@ -14,7 +14,8 @@ an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_
 (the tip probability and label refined by the fitted map: the posterior of the readings in
 :func:`wholearm_tools.fit.infer.infer`; empty before fitting), ``link_by_map`` (the link the
 fitted map supports where the joint signals could not tell the links of a rigid group apart;
-``link`` elsewhere, empty before fitting).
+``link`` elsewhere, empty before fitting), ``t_settle`` [s] (when the contact settled, where its
+configuration was measured) and ``t_end`` [s] (its release; both empty when not known).
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ class ContactTable:
     p_tip_map : (M,) float, tip probability refined by the fitted map (NaN before fitting)
     label_map : (M,) str, its label (empty before fitting)
     link_by_map : (M,) int, the link refined by the fitted map (-1 before fitting)
+    t_settle, t_end : (M,) float, when the contact settled and was released (NaN: not known)
     """
 
     t: FloatArray
@@ -67,9 +69,14 @@ class ContactTable:
     p_tip_map: FloatArray | None = None
     label_map: NDArray[np.str_] | None = None
     link_by_map: NDArray[np.int64] | None = None
+    t_settle: FloatArray | None = None
+    t_end: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = np.asarray(self.t).reshape(-1).shape[0]
+        for name in ("t_settle", "t_end"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.full(m, np.nan))
         if self.link_by_map is None:
             object.__setattr__(self, "link_by_map", np.full(m, -1, dtype=np.int64))
         if self.p_tip_map is None:
@@ -86,7 +93,8 @@ class ContactTable:
                 "tip_radius": (float, (m,)), "seg_a": (float, (m, d)), "seg_b": (float, (m, d)),
                 "link_radius": (float, (m,)), "primitive": (np.int64, (m,)),
                 "residual": (float, (m,)), "p_tip_map": (float, (m,)),
-                "label_map": (np.str_, (m,)), "link_by_map": (np.int64, (m,))}
+                "label_map": (np.str_, (m,)), "link_by_map": (np.int64, (m,)),
+                "t_settle": (float, (m,)), "t_end": (float, (m,))}
         for name, (dtype, shape) in spec.items():
             arr = read_only(getattr(self, name), dtype)
             if arr.size == 0 and 0 in shape:
@@ -139,7 +147,7 @@ class ContactTable:
         header = ["t", "link", "p_tip", "label", "variance", "used_as",
                   *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
                   *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual",
-                  "p_tip_map", "label_map", "link_by_map"]
+                  "p_tip_map", "label_map", "link_by_map", "t_settle", "t_end"]
         rows = []
         for i in range(len(self)):
             residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
@@ -153,6 +161,8 @@ class ContactTable:
                 f"{self.link_radius[i]:.9g}", str(int(self.primitive[i])), residual,
                 p_map, str(self.label_map[i]),
                 str(int(self.link_by_map[i])) if self.link_by_map[i] >= 0 else "",
+                *["" if not np.isfinite(v) else f"{v:.6f}"
+                  for v in (self.t_settle[i], self.t_end[i])],
             ]
             rows.append(dict(zip(header, cells, strict=True)))
         return header, rows
@@ -225,6 +235,7 @@ class ContactTable:
             "residual": optional("residual"), "p_tip_map": optional("p_tip_map"),
             "label_map": np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
             "link_by_map": optional_int("link_by_map"),
+            "t_settle": optional("t_settle"), "t_end": optional("t_end"),
         }
         try:
             return cls(**fields)
@@ -242,7 +253,8 @@ def table_column_types(dim: int) -> dict[str, str]:
     types["tip_radius"] = "float64"
     types.update({f"{p}_{c}": "float64" for p in ("a", "b") for c in axes})
     types.update({"link_radius": "float64", "primitive": "int64", "residual": "float64",
-                  "p_tip_map": "float64", "label_map": "string", "link_by_map": "int64"})
+                  "p_tip_map": "float64", "label_map": "string", "link_by_map": "int64",
+                  "t_settle": "float64", "t_end": "float64"})
     return types
 
 

@@ -95,7 +95,7 @@ def contact_table(robot: RobotModel, contacts: Any, classification: Any) -> Cont
         t=contacts.t, link=link, p_tip=p_tip, label=label, variance=classification.variance,
         used_as_tip=used_as_tip, tip_center=seg_b, tip_radius=tip_radius, seg_a=seg_a,
         seg_b=seg_b, link_radius=link_radius, primitive=np.full(m, -1),
-        residual=np.full(m, np.nan),
+        residual=np.full(m, np.nan), t_settle=contacts.t_settle, t_end=contacts.t_end,
     )
 
 

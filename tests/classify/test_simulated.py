@@ -33,7 +33,7 @@ LABELLED_MIN = {"lab_sharp": 0.6, "well_junction": 0.0}
 
 def test_links_are_identified(run):
     c = detect_contacts(run.log, run.robot)
-    m = match_events(c, run.truth, at=run.log.t[c.index])
+    m = match_events(c, run.truth)
     assert len(c) >= 8
     assert np.all(m >= 0), "every detection is a true contact"
     assert np.mean(c.link == run.truth.contact_link[m]) >= 0.95
@@ -47,7 +47,7 @@ def test_labels_agree_with_truth_and_offline_beats_causal(run):
     rule it out) — the open issue in docs/method.md."""
     B = 0.02
     c = detect_contacts(run.log, run.robot)
-    m = match_events(c, run.truth, at=run.log.t[c.index])
+    m = match_events(c, run.truth)
     truth_tip = run.truth.is_tip[m]
     kind = np.asarray(run.truth.contact_kind)[m]
     grid = swept_map(run.robot, run.log.q, B=B)
@@ -77,7 +77,7 @@ def test_bundled_scenario_short_run(name):
     run = load_scenario(name).simulate(seed=0, duration=20).run
     B = 0.02
     c = detect_contacts(run.log, run.robot)
-    m = match_events(c, run.truth, at=run.log.t[c.index])
+    m = match_events(c, run.truth)
     assert len(c) >= 5
     assert np.all(m >= 0)
     assert np.mean(c.link == run.truth.contact_link[m]) >= LINK_MIN[name]

@@ -6,10 +6,11 @@ from wholearm_tools.contacts import Contacts, match_events
 from wholearm_tools.logs.records import GroundTruth
 
 
-def _contacts(t, t_end, link, n=3):
+def _contacts(t, t_end, link, n=3, t_settle=None):
     m = len(t)
     return Contacts(np.asarray(t, float), np.asarray(link), np.zeros(m, int), np.zeros((m, n)),
-                    np.zeros((m, n)), np.asarray(t_end, float), np.ones(n), np.ones(n))
+                    np.zeros((m, n)), np.asarray(t_end, float), np.ones(n), np.ones(n),
+                    t_settle=t_settle)
 
 
 def _truth(t, t_end, link, kind):
@@ -48,8 +49,6 @@ def test_a_detection_pairs_with_the_contact_on_its_link_held_where_it_measured()
     # it at 2.3 s, where the detection settled and named link 2.  The elbow's event overlaps the
     # detection far longer, but the detection measured the tip's contact
     truth = _truth([1.0, 2.3], [2.8, 2.6], [1, 2], ["body", "tip"])
-    det = _contacts([1.02], [2.8], [2])
-    assert match_events(det, truth).tolist() == [0]
-    assert match_events(det, truth, at=np.array([2.4])).tolist() == [1]
-    # measured before the tip touched: the tip's contact is not what it measured
-    assert match_events(det, truth, at=np.array([2.0])).tolist() == [0]
+    assert match_events(_contacts([1.02], [2.8], [2], t_settle=[2.4]), truth).tolist() == [1]
+    # settled before the tip touched: the tip's contact is not what it measured
+    assert match_events(_contacts([1.02], [2.8], [2], t_settle=[2.0]), truth).tolist() == [0]

@@ -137,7 +137,8 @@ def _junction_case():
                        surface=[0] * len(pts))
     table = SimpleNamespace(t=t + 0.01, link=np.full(len(pts), 5), p_tip=np.full(len(pts), 0.9),
                             label=np.array(["tip"] * len(pts)),
-                            primitive=np.array([0] * 6 + [1] * 3))
+                            primitive=np.array([0] * 6 + [1] * 3),
+                            t_settle=t + 0.02, t_end=t + 0.3)
     prims = [cylinder(0, c, (0, 0, 1), 0.18, (-0.4, 0.2), support=(6, 0)),
              cylinder(1, c, v, 0.126, (0.3, 0.7), support=(3, 0)),
              MappedPrimitive(id=2, kind="plane", params={"point": np.array([0, 0, 2.0]),

@@ -5,6 +5,6 @@ from wholearm_tools.contacts.detect import (
     DetectionParams,
     detect_contacts,
 )
-from wholearm_tools.contacts.truth import match_events, match_truth
+from wholearm_tools.contacts.truth import match_events, pair_events
 
-__all__ = ["Contacts", "DetectionParams", "detect_contacts", "match_events", "match_truth"]
+__all__ = ["Contacts", "DetectionParams", "detect_contacts", "match_events", "pair_events"]

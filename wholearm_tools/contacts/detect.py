@@ -151,6 +151,8 @@ class Contacts:
     held : (M, n) bool
         Joints at rest and unloaded just before the stop (not driven by this move): their
         torque at the stop is the contact force's moment alone.  All False when unknown.
+    t_settle : (M,) float
+        When the contact settled (the time of ``index``), seconds; ``t`` when not given.
     link_prior : (M, n) float
         Probability of each link having made the contact, from the signals and the swept map
         alone: one-hot at ``link`` unless the joints could not tell the links of a rigid group
@@ -171,11 +173,14 @@ class Contacts:
     tau_peak: FloatArray | None = None
     held: NDArray[np.bool_] | None = None
     link_prior: FloatArray | None = None
+    t_settle: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = np.asarray(self.velocity_threshold).shape[0]
         m = np.asarray(self.t).reshape(-1).shape[0]
         object.__setattr__(self, "t", _frozen(self.t).reshape(m))
+        object.__setattr__(self, "t_settle", _frozen(self.t if self.t_settle is None
+                                                     else self.t_settle).reshape(m))
         object.__setattr__(self, "link", _frozen(self.link, np.int64).reshape(m))
         object.__setattr__(self, "index", _frozen(self.index, np.int64).reshape(m))
         object.__setattr__(self, "t_end", _frozen(self.t_end).reshape(m))
@@ -220,7 +225,7 @@ class Contacts:
                         self.qd_before[sel], self.t_end[sel], self.velocity_threshold,
                         self.torque_threshold, dict(self.meta),
                         tau_peak=self.tau_peak[sel], held=self.held[sel],
-                        link_prior=self.link_prior[sel])
+                        link_prior=self.link_prior[sel], t_settle=self.t_settle[sel])
 
 
 def _check_log(log: JointLog) -> None:
@@ -674,4 +679,4 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     idx = np.array([e.settle for e in events])
     return Contacts(log.t[[e.start for e in events]], links, idx, out_q, out_qd,
                     log.t[[min(e.end, log.n_samples - 1) for e in events]], v_th, tau_th, meta,
-                    tau_peak=peak, held=held, link_prior=prior)
+                    tau_peak=peak, held=held, link_prior=prior, t_settle=log.t[idx])

@@ -15,11 +15,10 @@ from wholearm_tools.report.metrics import (
     SurfaceRecovery,
     classification_metrics,
     evaluate,
-    match_contacts,
 )
 from wholearm_tools.report.pdf import ReportInfo, write_report
 
 __all__ = ["AccuracyReport", "ClassificationMetrics", "Estimate", "JunctionSummary",
            "PrimitiveAccuracy", "ReportData", "ReportInfo", "SurfaceRecovery",
            "classification_metrics", "evaluate", "junction_summary", "load_report_data",
-           "match_contacts", "write_report"]
+           "write_report"]

@@ -2,11 +2,11 @@
 
 What is scored, and how
 -----------------------
-* **Contacts** — each detected contact is paired with the ground-truth contact it corresponds to
-  by time (:func:`match_contacts`, a thin wrapper of
-  :func:`wholearm_tools.contacts.match_truth`: a detection at ``t_d`` matches the latest unmatched
-  truth contact in ``[t_d - max_lag, t_d + lead]``, one to one).  Unpaired detections are *false*
-  detections, unpaired truth contacts are *missed*.
+* **Contacts** — each detected contact is paired with the ground-truth contact event it
+  corresponds to (:func:`wholearm_tools.contacts.pair_events`: intervals first obstruction →
+  release, one to one, a detection pairing first with the event on its link that was in contact
+  where it settled).  Unpaired detections are *false* detections, unpaired truth contacts are
+  *missed*.
 * **Link identification** — fraction of paired contacts whose detected link is the true link.
 * **Tip/link classification** — a 2 × 3 confusion matrix: rows = truth (``tip`` = tip or joint
   sphere, the paper's "tip" class; ``body`` = the link's side), columns = predicted label
@@ -73,38 +73,6 @@ def _json(value: Any) -> Any:
 
 
 # ---------------------------------------------------------------------------------- contacts
-
-
-class _Times:
-    """The two attributes :func:`~wholearm_tools.contacts.match_truth` reads."""
-
-    def __init__(self, t: FloatArray) -> None:
-        self.t = t
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
-
-def match_contacts(t_detected: Any, truth: Any, *, max_lag: float = 0.1,
-                   lead: float = 0.005) -> NDArray[np.int64]:
-    """Index of the ground-truth contact paired with each detection (``-1``: none).
-
-    Parameters
-    ----------
-    t_detected : (M,) float, detection times on the log clock [s]
-    truth : GroundTruth
-    max_lag, lead : float, accepted lag of the detection after (before) the true touch [s]
-
-    Returns
-    -------
-    (M,) int
-    """
-    from wholearm_tools.contacts import match_truth
-
-    t = np.asarray(t_detected, dtype=float).reshape(-1)
-    if not (max_lag >= 0 and lead >= 0):
-        raise InputError(f"max_lag and lead must be >= 0 s, got {max_lag}, {lead}")
-    return match_truth(_Times(t), truth, max_lag=max_lag, lead=lead)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -177,7 +145,7 @@ class ClassificationMetrics:
 
 
 def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any, *,
-                           max_lag: float = 0.1, lead: float = 0.005,
+                           t_end: Any = None, t_settle: Any = None,
                            bins: Sequence[float] = DEFAULT_BINS) -> ClassificationMetrics:
     """Score detected and classified contacts against ground truth.
 
@@ -186,8 +154,13 @@ def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any
     t : (M,) float, detection times [s]; link : (M,) int, detected link
     p_tip : (M,) float, tip probability; label : (M,) str, ``tip``/``link``/``ambiguous``
     truth : GroundTruth
+    t_end, t_settle : (M,) float, optional; each detection's release and the time it settled
+        (NaN or absent: a moment at ``t``), for the pairing
+        (:func:`wholearm_tools.contacts.pair_events`)
     bins : increasing P_T bin edges from 0 to 1 for the calibration
     """
+    from wholearm_tools.contacts.truth import pair_events
+
     t = np.asarray(t, dtype=float).reshape(-1)
     m = t.shape[0]
     link = np.asarray(link, dtype=np.int64).reshape(-1)
@@ -203,7 +176,7 @@ def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any
     if bad:
         raise InputError(f"unknown contact labels {bad} (expected tip, link, ambiguous)")
 
-    idx = match_contacts(t, truth, max_lag=max_lag, lead=lead)
+    idx = pair_events(t, t_end, link, truth, at=t_settle)
     ok = idx >= 0
     j = idx[ok]
     true_tip = np.asarray(truth.is_tip)[j]
@@ -498,8 +471,7 @@ def match_primitives(primitives: Sequence[Any], member_truth: Sequence[NDArray[n
     return out
 
 
-def evaluate(rec: Any, *, max_lag: float = 0.1, lead: float = 0.005,
-             resolution: float = 0.01) -> AccuracyReport | None:
+def evaluate(rec: Any, *, resolution: float = 0.01) -> AccuracyReport | None:
     """Score a :class:`~wholearm_tools.pipeline.Reconstruction` against its run's ground truth.
 
     Returns None when the run has no ground truth (real logs).
@@ -509,7 +481,7 @@ def evaluate(rec: Any, *, max_lag: float = 0.1, lead: float = 0.005,
         return None
     table = rec.table
     cls = classification_metrics(table.t, table.link, table.p_tip, table.label, truth,
-                                 max_lag=max_lag, lead=lead)
+                                 t_end=table.t_end, t_settle=table.t_settle)
     surfaces = true_surfaces(truth)
     contact_surf = truth_contact_surfaces(truth, surfaces)
     idx = cls.truth_index
@@ -536,6 +508,6 @@ def evaluate(rec: Any, *, max_lag: float = 0.1, lead: float = 0.005,
             and np.all(np.isfinite(table.p_tip_map))):
         link_map = np.asarray(getattr(table, "link_by_map", table.link))
         cls_map = classification_metrics(table.t, np.where(link_map >= 0, link_map, table.link),
-                                         table.p_tip_map, label_map, truth, max_lag=max_lag,
-                                         lead=lead)
+                                         table.p_tip_map, label_map, truth,
+                                         t_end=table.t_end, t_settle=table.t_settle)
     return AccuracyReport(cls, tuple(accs), recovery, cls_map)

@@ -932,9 +932,10 @@ def _ptip_axes(ax: Any, data: Any) -> None:
     if n:
         truth_tip = None
         if data.run.truth is not None:
-            from wholearm_tools.report.metrics import match_contacts
+            from wholearm_tools.contacts import pair_events
 
-            idx = match_contacts(np.asarray(table.t), data.run.truth)
+            idx = pair_events(table.t, table.t_end, table.link, data.run.truth,
+                              at=table.t_settle)
             truth_tip = np.where(idx >= 0, data.run.truth.is_tip[np.maximum(idx, 0)], -1)
         final = np.asarray(table.p_tip)
         for k in range(n):
