@@ -75,7 +75,8 @@ def sample_table(dim: int = 2) -> ContactTable:
         residual=np.array([1e-4, -2e-4, 3e-5, np.nan, 0.0]),
         p_tip_map=np.array([0.99, 0.01, np.nan, 0.0, 1.0]),
         label_map=np.array(["tip", "link", "", "link", "tip"]),
-        link_by_map=np.array([0, 2, -1, 0, 1]))
+        link_by_map=np.array([0, 2, -1, 0, 1]),
+        t_settle=np.arange(m) * 1.5 + 0.2, t_end=np.array([0.5, 2.0, np.nan, 5.0, 6.5]))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -93,6 +94,20 @@ def test_contact_table_csv_round_trip(tmp_path, dim: int) -> None:
     np.testing.assert_allclose(back.p_tip_map, table.p_tip_map, equal_nan=True)
     np.testing.assert_array_equal(back.label_map, table.label_map)
     np.testing.assert_array_equal(back.link_by_map, table.link_by_map)
+    np.testing.assert_allclose(back.t_settle, table.t_settle)
+    np.testing.assert_allclose(back.t_end, table.t_end, equal_nan=True)
+
+
+def test_contact_table_without_event_times_reads_them_as_unknown(tmp_path) -> None:
+    """A table written before the event columns (or by hand) still reads: its contacts are
+    moments at ``t``, and scoring pairs them by time alone."""
+    header, rows = sample_table().rows()
+    keep = [h for h in header if h not in ("t_settle", "t_end")]
+    path = tmp_path / "contacts.csv"
+    path.write_text(",".join(keep) + "\n"
+                    + "\n".join(",".join(r[h] for h in keep) for r in rows) + "\n")
+    back = read_contact_table(path)
+    assert np.all(np.isnan(back.t_settle)) and np.all(np.isnan(back.t_end))
 
 
 def test_contact_table_errors(tmp_path) -> None:
