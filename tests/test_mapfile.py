@@ -107,7 +107,8 @@ def test_contact_table_without_event_times_reads_them_as_unknown(tmp_path) -> No
     path.write_text(",".join(keep) + "\n"
                     + "\n".join(",".join(r[h] for h in keep) for r in rows) + "\n")
     back = read_contact_table(path)
-    assert np.all(np.isnan(back.t_settle)) and np.all(np.isnan(back.t_end))
+    assert np.all(np.isnan(back.t_settle))
+    assert np.all(np.isnan(back.t_end))
 
 
 def test_contact_table_errors(tmp_path) -> None:
