@@ -192,3 +192,30 @@ def test_true_surfaces_rejects_malformed_truth():
                      point=np.zeros((0, 3)), surface=[])
     with pytest.raises(InputError, match="malformed"):
         true_surfaces(bad)
+
+
+def test_a_contact_in_a_corner_votes_for_both_walls():
+    """A tip in the corner of a floor and a wall touches both, whichever the simulator
+    recorded (here the floor): the plane fitted on the wall and its corner contacts is the
+    wall, not the floor it ties with on the recorded surfaces."""
+    floor = {"id": 0, "type": "plane", "params": {"point": [0, 0, 0], "normal": [0, 0, 1.0]},
+             "free_side": 1}
+    wall = {"id": 1, "type": "plane", "params": {"point": [0, 0, 0], "normal": [1.0, 0, 0]},
+            "free_side": 1}
+    y = np.linspace(-0.2, 0.2, 3)
+    on_wall = np.stack([np.zeros(3), y, np.full(3, 0.3)], axis=1)
+    in_corner = np.stack([np.full(3, 0.004), y, np.full(3, 0.004)], axis=1)
+    truth = make_truth([floor, wall], t=np.arange(1.0, 7.0), link=[2] * 6, kind=["tip"] * 6,
+                       point=np.vstack([on_wall, in_corner]), surface=[1, 1, 1, 0, 0, 0])
+    t = np.arange(1.0, 7.0)
+    table = SimpleNamespace(t=t + 0.01, link=np.full(6, 2), p_tip=np.full(6, 0.9),
+                            label=np.array(["tip"] * 6), primitive=np.zeros(6, int),
+                            t_settle=t + 0.02, t_end=t + 0.3)
+    plane = MappedPrimitive(id=0, kind="plane", params={"point": np.zeros(3),
+                                                        "normal": np.array([1.0, 0, 0])},
+                            extent={"u": [0, 1, 0], "v": [0, 0, 1],
+                                    "polygon": [[-0.2, 0], [0.2, 0], [0.2, 0.3], [-0.2, 0.3]]})
+    acc = evaluate(fake_rec([plane], truth, table=table))
+    (p,) = acc.primitives
+    assert (p.truth_id, p.votes) == (1, {0: 3, 1: 6})
+    assert p.type_correct

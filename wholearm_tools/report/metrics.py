@@ -263,6 +263,23 @@ def truth_contact_surfaces(truth: Any, surfaces: Sequence[TrueSurface] | None = 
     return out
 
 
+def truth_contact_touches(truth: Any, surfaces: Sequence[TrueSurface], resolution: float
+                          ) -> NDArray[np.bool_]:
+    """Which true surfaces each true contact touched, ``(M, S) bool``: its own
+    (:func:`truth_contact_surfaces`) and every other within ``resolution`` of its contact point
+    (a tip in a corner touches both walls, whichever the simulator recorded)."""
+    own = truth_contact_surfaces(truth, surfaces)
+    m = own.shape[0]
+    out = np.zeros((m, len(surfaces)), dtype=bool)
+    if m == 0 or not surfaces:
+        return out
+    points = np.asarray(truth.contact_point, dtype=float)
+    for i, srf in enumerate(surfaces):
+        out[:, i] = _surface_distance(srf.primitive, points) <= resolution
+    out[np.flatnonzero(own >= 0), own[own >= 0]] = True
+    return out
+
+
 def _surface_distance(prim: Any, points: FloatArray) -> FloatArray:
     dim = 2 if prim.kind in ("line", "circle") else 3
     if points.shape[1] != dim:
@@ -453,22 +470,34 @@ def match_primitives(primitives: Sequence[Any], member_truth: Sequence[NDArray[n
                      surfaces: Sequence[TrueSurface], resolution: float = 0.01
                      ) -> list[tuple[int | None, str | None, dict[int, int]]]:
     """True surface (position in ``surfaces``) of each primitive: majority vote of the true
-    surfaces its member contacts touched (``member_truth[i]``: positions, -1 ignored), else the
-    nearest true surface to its surface samples.  Returns ``(index | None, how, votes)``."""
+    surfaces its member contacts touched (``member_truth[i]``: positions, one entry per member
+    and surface it touched, -1 ignored), a tie going to the one nearest its surface samples;
+    else the nearest true surface to its surface samples.  Returns ``(index | None, how,
+    votes)``."""
     out: list[tuple[int | None, str | None, dict[int, int]]] = []
     for prim, members in zip(primitives, member_truth, strict=True):
         votes = Counter(int(v) for v in np.asarray(members).reshape(-1) if v >= 0)
         if votes:
-            best = max(sorted(votes), key=lambda k: votes[k])
+            top = max(votes.values())
+            tied = sorted(k for k, n in votes.items() if n == top)
+            near = _nearest_surface(prim, surfaces, tied, resolution) if len(tied) > 1 else None
+            best = tied[0] if near is None else near
             out.append((best, "contacts", {surfaces[k].id: n for k, n in sorted(votes.items())}))
             continue
-        samples = surface_samples(prim, resolution)
-        if not len(samples) or not surfaces:
-            out.append((None, None, {}))
-            continue
-        mean = [float(np.mean(_surface_distance(s.primitive, samples))) for s in surfaces]
-        out.append((int(np.argmin(mean)), "distance", {}))
+        k = _nearest_surface(prim, surfaces, list(range(len(surfaces))), resolution)
+        out.append((k, "distance", {}) if k is not None else (None, None, {}))
     return out
+
+
+def _nearest_surface(prim: Any, surfaces: Sequence[TrueSurface], cands: list[int],
+                     resolution: float) -> int | None:
+    """Of the true surfaces ``cands``, the nearest to ``prim``'s surface samples (mean
+    distance); None without candidates or samples."""
+    samples = surface_samples(prim, resolution) if cands else np.zeros((0, 2))
+    if not len(samples):
+        return None
+    mean = [float(np.mean(_surface_distance(surfaces[k].primitive, samples))) for k in cands]
+    return cands[int(np.argmin(mean))]
 
 
 def evaluate(rec: Any, *, resolution: float = 0.01) -> AccuracyReport | None:
@@ -484,11 +513,12 @@ def evaluate(rec: Any, *, resolution: float = 0.01) -> AccuracyReport | None:
                                  t_end=table.t_end, t_settle=table.t_settle)
     surfaces = true_surfaces(truth)
     contact_surf = truth_contact_surfaces(truth, surfaces)
+    touches = truth_contact_touches(truth, surfaces, resolution)
     idx = cls.truth_index
-    per_contact = np.where(idx >= 0, contact_surf[np.maximum(idx, 0)], -1)
     prims = rec.surface_map.primitives
     assignment = np.asarray(table.primitive)
-    members = [per_contact[assignment == p.id] for p in prims]
+    members = [np.nonzero(touches[idx[(assignment == p.id) & (idx >= 0)]])[1]
+               if len(surfaces) else np.zeros(0, np.int64) for p in prims]
     matches = match_primitives(prims, members, surfaces, resolution)
     accs = []
     for prim, (k, how, votes) in zip(prims, matches, strict=True):
