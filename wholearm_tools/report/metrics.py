@@ -16,7 +16,9 @@ What is scored, and how
 * **Primitives** — each fitted primitive is matched to a true surface by majority vote over the
   true surfaces its member contacts touched; a true obstacle made of several surfaces (a
   ``cylinder_junction`` holds the main bore and the lateral under one surface id) is resolved per
-  contact by the nearest of its surfaces to the true contact point.  Primitives without paired
+  contact by the nearest of its surfaces to the true contact point, and a contact also votes for
+  any other true surface within the resolution of its point (a tip in a corner touches both
+  walls); a tie goes to the surface nearest the primitive.  Primitives without paired
   member contacts fall back to the true surface nearest to their fitted surface (mean distance of
   surface samples).  Per primitive: type right, size error (radius; torus major radius; cone
   half-angle in degrees), axis/normal angle error (degrees; unsigned for lines, planes, cylinders
