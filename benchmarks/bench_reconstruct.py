@@ -44,12 +44,14 @@ from wholearm_tools.contact_table import ContactTable
 from wholearm_tools.contacts import match_events
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.pipeline import Reconstruction, fit_table, position_noise_floor, reconstruct
-from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_surfaces
+from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_touches
 from wholearm_tools.sim.scenarios import load_scenario
 
 SCENARIOS = ("lab_circle", "lab_sharp", "paper_planar", "paper_spatial", "well_junction")
 #: a found surface is ``off`` unless one of its primitives is within these of it
 OFF_SIZE_PCT, OFF_RMS = 5.0, 5e-3
+#: a true contact touches every true surface within this of its point (``evaluate``'s default)
+RESOLUTION = 0.01
 
 
 def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
@@ -61,20 +63,20 @@ def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
 
 def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     """Per true surface (position index), the distinct detected contacts (one table row per
-    configuration) consistent with it as the fit uses them: tip or link residual of the true
+    configuration) paired with a true contact that touched it (a corner contact counts for both
+    walls) and consistent with it as the fit uses them: tip or link residual of the true
     surface below ``tol`` metres."""
     from wholearm_tools.fit import residuals
     from wholearm_tools.pipeline import fit_data_from_table
 
     truth = rec.run.truth
     surfaces = true_surfaces(truth)
-    cs = truth_contact_surfaces(truth, surfaces)
+    touches = truth_contact_touches(truth, surfaces, RESOLUTION)
     mi = match_events(rec.contacts, truth)
     table = rec.table
-    surf = np.where(mi >= 0, cs[np.maximum(mi, 0)], -1)
     out: dict[int, np.ndarray] = {}
     for i, s in enumerate(surfaces):
-        rows = np.flatnonzero(surf == i)
+        rows = np.flatnonzero((mi >= 0) & touches[np.maximum(mi, 0), i])
         if len(rows) == 0:
             out[i] = rows
             continue
