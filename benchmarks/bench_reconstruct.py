@@ -244,12 +244,12 @@ def main() -> None:
               f"{100 * b['amb']:>11.1f}{100 * b['link_acc_map']:>12.1f}"
               f"{100 * b['cls_acc_map']:>13.1f}{100 * b['amb_map']:>11.1f}")
     print("-" * 82)
+
+    def pct(a: int, b: int) -> float:
+        return 100.0 * a / b if b else float("nan")
+
     for name in [*dict.fromkeys(r[0] for r in rows), "all"]:
         tot = np.sum([r[7]["cls_counts"] for r in rows if name in ("all", r[0])], axis=0)
-
-        def pct(a: int, b: int) -> float:
-            return 100.0 * a / b if b else float("nan")
-
         print(f"{name:<14}{'all':>4}"
               + "".join(f"{pct(t[1], t[0]):>{w1}.1f}{pct(t[3], t[2]):>13.1f}"
                         f"{pct(t[4], t[0]):>11.1f}" for t, w1 in ((tot[0], 8), (tot[1], 12))))

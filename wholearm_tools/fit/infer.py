@@ -426,6 +426,7 @@ class _Context:
     sigma_id: float = 0.0       # kinematic error the proposals are judged determined at
     max_rel_std: float = math.inf
     extend: int = 12            # contacts an undetermined seed may try, one at a time
+    set_iter: int = 20          # solver iterations of a minimal set's hypothesis
 
 
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
@@ -506,8 +507,8 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
                     rs = np.flatnonzero(rd.contact == c)
                     p = np.exp(rd.log_prior[rs])
                     idx.append(int(rng.choice(rs, p=p / p.sum())))
-                g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free, max_iter=20,
-                                 covariance=False, quick=True)
+                g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free,
+                                 max_iter=ctx.set_iter, covariance=False, quick=True)
             found = _consensus(g, rd, sel, near, anchor, ctx.tol) if g else None
             if found is not None and found[0] > best_key:
                 best_key, best = found[0], found[1:]
@@ -761,7 +762,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
                         policy.consensus_trials, key, free, policy.proposal_iterations,
                         policy.seed_accept if known else math.inf, sigma_id(sig),
-                        policy.max_rel_std, policy.seed_extend)
+                        policy.max_rel_std, policy.seed_extend, policy.minimal_set_iterations)
 
     def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
              origin: str) -> Hypothesis | None:

@@ -42,6 +42,8 @@ class FitPolicy:
     proposal_iterations : solver iterations of every fit a seed makes and of a refit from
         scratch: a type that does not describe its contacts does not converge in them, and is
         not worth finishing (refits warm-started from a selected primitive get 200).
+    minimal_set_iterations : solver iterations of a consensus hypothesis (a minimal set fitted
+        exactly): it only has to be close enough for the inlier test.
     rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
     em_rounds : most assign -> refit -> select iterations.
     neighbours : contacts per contact in the growth graph.
@@ -80,6 +82,7 @@ class FitPolicy:
     seed_extend: int = 12
     consensus_trials: int = 12
     proposal_iterations: int = 30
+    minimal_set_iterations: int = 20
     rounds: int = 3
     em_rounds: int = 6
     neighbours: int = 6
@@ -97,8 +100,8 @@ class FitPolicy:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number, got {value!r}")
-        for name in ("max_seeds", "consensus_trials", "proposal_iterations", "rounds", "em_rounds",
-                     "neighbours"):
+        for name in ("max_seeds", "consensus_trials", "proposal_iterations",
+                     "minimal_set_iterations", "rounds", "em_rounds", "neighbours"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
         if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):

@@ -250,19 +250,7 @@ def truth_contact_surfaces(truth: Any, surfaces: Sequence[TrueSurface] | None = 
     resolved by the surface nearest to the true contact point.  -1 where nothing fits.
     """
     surfaces = true_surfaces(truth) if surfaces is None else tuple(surfaces)
-    m = int(truth.n_contacts)
-    out = np.full(m, -1, dtype=np.int64)
-    if not surfaces or m == 0:
-        return out
-    points = np.asarray(truth.contact_point, dtype=float)
-    dists = np.stack([_surface_distance(s.primitive, points) for s in surfaces], axis=1)
-    obstacle_ids = [s.obstacle_id for s in surfaces]
-    for k in range(m):
-        cand = [i for i, oid in enumerate(obstacle_ids) if oid == truth.contact_surface[k]]
-        if not cand:
-            cand = list(range(len(surfaces)))
-        out[k] = cand[int(np.argmin(dists[k, cand]))]
-    return out
+    return _surfaces_touched(truth, surfaces, 0.0)[0]
 
 
 def truth_contact_touches(truth: Any, surfaces: Sequence[TrueSurface], resolution: float
@@ -270,16 +258,29 @@ def truth_contact_touches(truth: Any, surfaces: Sequence[TrueSurface], resolutio
     """Which true surfaces each true contact touched, ``(M, S) bool``: its own
     (:func:`truth_contact_surfaces`) and every other within ``resolution`` of its contact point
     (a tip in a corner touches both walls, whichever the simulator recorded)."""
-    own = truth_contact_surfaces(truth, surfaces)
-    m = own.shape[0]
-    out = np.zeros((m, len(surfaces)), dtype=bool)
-    if m == 0 or not surfaces:
-        return out
+    return _surfaces_touched(truth, tuple(surfaces), resolution)[1]
+
+
+def _surfaces_touched(truth: Any, surfaces: tuple[TrueSurface, ...], resolution: float
+                      ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`truth_contact_surfaces` and :func:`truth_contact_touches` from one set of
+    distances."""
+    m = int(truth.n_contacts)
+    own = np.full(m, -1, dtype=np.int64)
+    touches = np.zeros((m, len(surfaces)), dtype=bool)
+    if not surfaces or m == 0:
+        return own, touches
     points = np.asarray(truth.contact_point, dtype=float)
-    for i, srf in enumerate(surfaces):
-        out[:, i] = _surface_distance(srf.primitive, points) <= resolution
-    out[np.flatnonzero(own >= 0), own[own >= 0]] = True
-    return out
+    dists = np.stack([_surface_distance(s.primitive, points) for s in surfaces], axis=1)
+    obstacle_ids = [s.obstacle_id for s in surfaces]
+    for k in range(m):
+        cand = [i for i, oid in enumerate(obstacle_ids) if oid == truth.contact_surface[k]]
+        if not cand:
+            cand = list(range(len(surfaces)))
+        own[k] = cand[int(np.argmin(dists[k, cand]))]
+    touches = dists <= resolution
+    touches[np.arange(m), own] = True
+    return own, touches
 
 
 def _surface_distance(prim: Any, points: FloatArray) -> FloatArray:
@@ -495,7 +496,9 @@ def _nearest_surface(prim: Any, surfaces: Sequence[TrueSurface], cands: list[int
                      resolution: float) -> int | None:
     """Of the true surfaces ``cands``, the nearest to ``prim``'s surface samples (mean
     distance); None without candidates or samples."""
-    samples = surface_samples(prim, resolution) if cands else np.zeros((0, 2))
+    if not cands:
+        return None
+    samples = surface_samples(prim, resolution)
     if not len(samples):
         return None
     mean = [float(np.mean(_surface_distance(surfaces[k].primitive, samples))) for k in cands]
@@ -514,8 +517,7 @@ def evaluate(rec: Any, *, resolution: float = 0.01) -> AccuracyReport | None:
     cls = classification_metrics(table.t, table.link, table.p_tip, table.label, truth,
                                  t_end=table.t_end, t_settle=table.t_settle)
     surfaces = true_surfaces(truth)
-    contact_surf = truth_contact_surfaces(truth, surfaces)
-    touches = truth_contact_touches(truth, surfaces, resolution)
+    contact_surf, touches = _surfaces_touched(truth, surfaces, resolution)
     idx = cls.truth_index
     prims = rec.surface_map.primitives
     assignment = np.asarray(table.primitive)
