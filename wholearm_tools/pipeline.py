@@ -222,7 +222,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive
-    from wholearm_tools.fit.gate import report_gate
+    from wholearm_tools.fit.gate import lying_flat, report_gate
     from wholearm_tools.fit.infer import DEFAULT_KINDS, infer
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.fit.policy import FitPolicy
@@ -294,7 +294,11 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                                    initial=dict(h.fit.params), free_side=h.fit.free_side)
             if robust:
                 fit = robust
-        gate = report_gate(fit, data, sigma_kin, policy.max_rel_std, B=float(B))
+        open_touch = np.empty(len(idx), dtype=bool)
+        open_touch[rd.fit_order(rd.sphere[idx])] = lying_flat(
+            fit, rd, members, policy.k_sigma * sigma_kin, float(B))
+        gate = report_gate(fit, data, sigma_kin, policy.max_rel_std, B=float(B),
+                           open_touch=open_touch)
         if not gate:
             messages.append(f"a {h.kind} on {len(members)} contacts not reported: "
                             f"{gate.reason}")

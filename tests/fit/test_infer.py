@@ -176,6 +176,39 @@ def test_report_gate_stops_a_plane_on_one_strip_up_a_post():
     assert report_gate(fit_primitive("plane", patch), patch, 3e-4, policy.max_rel_std, B=0.02)
 
 
+@pytest.mark.parametrize(("lying_flat_link", "reported"), [(True, False), (False, True)])
+def test_report_gate_leaves_out_of_the_type_test_a_link_lying_flat(lying_flat_link, reported):
+    """Seven contacts whose sphere readings (the spheres at the links' outer ends) spread 7 cm
+    along the wall y = 0.3.  When each one's link lies flat along the wall (an arm resting
+    against one point of a post while its outer links move), the link could touch a surface
+    curved at B anywhere along it: the contact says nothing of the curvature, and the line's
+    type is not determined.  When each link comes in steeply, the sphere is where it touched,
+    and seven such points spread over 7 cm tell a wall from a post of radius B."""
+    from wholearm_tools.fit import lying_flat
+    from wholearm_tools.fit.readings import Readings
+
+    w, B, sigma_kin = 0.02, 0.03, 3e-4
+    u = np.linspace(-0.035, 0.035, 7)
+    centre = np.c_[u, np.full(7, 0.3 - w)]
+    back = np.array([-0.25, 0.0]) if lying_flat_link else np.array([-0.18, -0.18])
+    # each contact read as its sphere, then as its link's side
+    sphere = np.tile([True, False], 7)
+    a = np.repeat(centre, 2, axis=0) + np.where(sphere, 0.0, 1.0)[:, None] * back
+    rd = Readings(contact=np.repeat(np.arange(7), 2), link=np.ones(14, int), sphere=sphere,
+                  log_prior=np.log(np.where(sphere, 0.7, 0.3)), a=a,
+                  b=np.repeat(centre, 2, axis=0), radius=np.full(14, w), n_contacts=7)
+    spheres = np.flatnonzero(rd.sphere)
+    data = rd.fit_data(spheres, free_points=np.array([[0.0, 0.0]]))
+    fit = fit_primitive("line", data)
+    assert fit
+    flat = lying_flat(fit, rd, np.arange(7), 3 * sigma_kin, B)
+    assert np.array_equal(flat, np.full(7, lying_flat_link))
+    g = report_gate(fit, data, sigma_kin, FitPolicy().max_rel_std, B=B, open_touch=flat)
+    assert bool(g) == reported
+    if not reported:
+        assert "curved at radius B" in g.reason
+
+
 def test_one_wall_touched_on_two_far_patches_is_one_line():
     """Twelve tips on each of two patches 0.6 m apart along one wall: every contact's nearest
     neighbours (and every seed's neighbourhood) lie in its own patch, so growth never joins

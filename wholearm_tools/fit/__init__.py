@@ -13,7 +13,7 @@ Public API
 
 from wholearm_tools.fit.core import LOSSES, cost, fit_primitive, residuals
 from wholearm_tools.fit.data import FitData, weight_from_tip_probability
-from wholearm_tools.fit.gate import GateResult, report_gate
+from wholearm_tools.fit.gate import GateResult, lying_flat, report_gate
 from wholearm_tools.fit.infer import Inference, infer
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings, readings_from_contacts
@@ -30,6 +30,7 @@ __all__ = [
     "cost",
     "fit_primitive",
     "infer",
+    "lying_flat",
     "readings_from_contacts",
     "report_gate",
     "residuals",

@@ -21,7 +21,14 @@ type).  A primitive reaches the map when
   curvature's marginal standard deviation (every flat parameter free), with every contact and
   without any one, must also be at most ``max_rel_std``.  Contacts on one small patch, or on
   one narrow strip of a post (a line of tips up its side), fit a tangent plane as well as the
-  post itself: the type is then not determined, and neither is reported.
+  post itself: the type is then not determined, and neither is reported.  A contact whose
+  link lies flat on the primitive (a side reading of it, of any candidate link, within the
+  kinematic errors of touching over a longer stretch than a surface curved at ``B`` would
+  be: :func:`lying_flat`) leaves its point of touch open along that stretch: the surface may
+  be flat along the link or touch it at any one point of it.  Its reading still fixes the
+  flat parameters, but it says nothing of the curvature, and the type test leaves it out (an
+  arm resting against one point of a post, touched again and again while its outer links
+  move, fits the post's tangent plane through every position of its resting link).
 
 The leave-one-out information ``J^T J - j_i^T j_i`` is a rank-one downdate, so the check costs
 no refit.
@@ -33,10 +40,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import _link_min, _normalise, _raw_from_params
 from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import MODELS, perp_bases
+from wholearm_tools.fit.readings import IntArray, Readings
 from wholearm_tools.fit.result import FitResult
 from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
@@ -96,10 +105,41 @@ def _curvature_rows(fit: FitResult, pts: np.ndarray, scale: float, B: float) -> 
                          0.5 * u[:, 1] ** 2], axis=1)
 
 
+def lying_flat(fit: FitResult, readings: Readings, contacts: IntArray, tol: float, B: float
+               ) -> NDArray[np.bool_]:
+    """Which of ``contacts`` leave their point of touch open along a link lying flat on the
+    flat primitive ``fit``: a side reading of theirs (any candidate link) whose axis stays
+    within ``tol`` of touching it (clearance ``|sd - radius| <= tol``, linear along the axis)
+    over more than ``2 sqrt(2 B tol)``, the chord over which a surface curved at radius ``B``
+    stays within ``tol`` of its tangent: the link could then touch such a surface anywhere
+    along that stretch.  All False for a curved type."""
+    out = np.zeros(len(contacts), dtype=bool)
+    if not MODELS[fit.kind].linear or fit.primitive is None or len(contacts) == 0:
+        return out
+    rows = np.flatnonzero(np.isin(readings.contact, contacts) & ~readings.sphere)
+    if len(rows) == 0:
+        return out
+    prim = fit.primitive
+    a, b, w = readings.a[rows], readings.b[rows], readings.radius[rows]
+    ca = np.asarray(prim.signed_distance(a)) - w
+    cb = np.asarray(prim.signed_distance(b)) - w
+    # the fraction of the axis where |ca + s (cb - ca)| <= tol
+    slope = cb - ca
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s1, s2 = (-tol - ca) / slope, (tol - ca) / slope
+    lo = np.where(slope == 0, np.where(np.abs(ca) <= tol, 0.0, 1.0), np.minimum(s1, s2))
+    hi = np.where(slope == 0, np.where(np.abs(ca) <= tol, 1.0, 0.0), np.maximum(s1, s2))
+    span = np.clip(np.minimum(hi, 1.0) - np.maximum(lo, 0.0), 0.0, None)
+    flat = span * np.linalg.norm(b - a, axis=1) > 2.0 * math.sqrt(2.0 * B * tol)
+    return np.isin(contacts, readings.contact[rows[flat]])
+
+
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
-                B: float | None = None) -> GateResult:
+                B: float | None = None, open_touch: ArrayLike | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
-    of a flat primitive needs ``B``; None skips it)."""
+    of a flat primitive needs ``B``; None skips it).  ``open_touch``: per row of ``data``
+    (tips first, then links), contacts whose point of touch is open along a link lying flat
+    (:func:`lying_flat`), left out of the type test."""
     m = MODELS[fit.kind]
     touch = _touch_rows(fit, data)
     rows, pts, scale = touch if touch is not None else (np.zeros((0, m.dof)), None, 0.0)
@@ -127,7 +167,10 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
                           "one of its contacts alone determines it: without it, the worst "
                           f"parameter combination is {_fmt(loo[i])} of its support's size")
     if B and m.linear:
-        full = np.hstack([rows, _curvature_rows(fit, pts, scale, B)])
+        curv = _curvature_rows(fit, pts, scale, B)
+        if open_touch is not None:
+            curv[np.asarray(open_touch, dtype=bool)] = 0.0
+        full = np.hstack([rows, curv])
 
         def worst_curvature(h: np.ndarray) -> float:
             # the curvature block's Schur complement: its information with the flat
