@@ -55,8 +55,13 @@ def test_too_few_contacts_is_a_message_not_an_error():
 
 
 def test_collinear_contacts_give_a_line_and_never_a_circle():
+    import dataclasses
+
     x = np.linspace(0.0, 0.4, 12)
-    table = _table(np.stack([x, np.full_like(x, 0.3)], axis=1))
+    tips = np.stack([x, np.full_like(x, 0.3)], axis=1)
+    # each tip's link comes from the free side below the wall (a link lying along the wall
+    # could touch it anywhere, and would leave the line's type open)
+    table = dataclasses.replace(_table(tips), seg_a=tips - [0.0, 0.3])
     smap, _, _, _ = fit_table(table, planar=True, B=0.02)
     assert [p.kind for p in smap.primitives] == ["line"]
     smap, _, _, messages = fit_table(table, planar=True, B=0.02, kinds=("circle",))
@@ -235,6 +240,36 @@ def test_same_input_gives_the_same_map():
         for key, value in a.params.items():
             np.testing.assert_array_equal(value, b.params[key])
     np.testing.assert_array_equal(out1.primitive, out2.primitive)
+
+
+@pytest.mark.parametrize(("reach", "label"), [(1.0, "ambiguous"), (0.1, "link")])
+def test_map_label_decides_only_beyond_the_kinematic_error(reach, label):
+    """A contact eq. (2) leaves at even odds, where its tip sphere and the side of its link
+    (of the same radius, touching 7 mm from the sphere) both lie on a well-fitted circle, the
+    sphere 0.3 mm off it and the side exactly on it.  With the kinematic errors of a 1 m arm
+    (0.5 mm) that difference does not tell the readings apart, and the map keeps the
+    ambiguity; with those of a 0.1 m arm (0.05 mm, below the 0.1 mm noise floor) the side
+    reading wins."""
+    import dataclasses
+
+    c, r, w = np.array([0.3, 0.2]), 0.08, 0.01
+    tips = _circle_tips(14, centre=tuple(c), r=r, w=w)
+    ang = 0.3
+    radial = np.array([np.cos(ang), np.sin(ang)])
+    p = c + (r + w + 3e-4) * radial                       # the sphere, 0.3 mm off the circle
+    delta = np.arccos((r + w) / (r + w + 3e-4))           # a link tangent to the circle + w
+    d = np.array([np.cos(ang + np.pi / 2 + delta), np.sin(ang + np.pi / 2 + delta)])
+    a = p + 0.3 * d                                       # the link comes in from beyond
+    base = _table(np.vstack([tips, p]))
+    m = len(base.t)
+    table = dataclasses.replace(
+        base, p_tip=np.r_[np.ones(m - 1), 0.5], label=np.append(np.full(m - 1, "tip"), "ambiguous"),
+        seg_a=np.vstack([base.seg_a[:-1], a]), seg_b=np.vstack([base.seg_b[:-1], p]))
+    smap, _, out, _ = fit_table(table, planar=True, B=0.02, noise_floor=1e-4, reach=reach)
+    assert [q.kind for q in smap.primitives] == ["circle"]
+    assert out.primitive[-1] == 0
+    assert out.label_map[-1] == label
+    assert np.all(out.label_map[:-1] == "tip")
 
 
 def test_map_refined_labels_are_right_and_leave_fewer_ambiguous(short_lab_run):

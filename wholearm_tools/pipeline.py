@@ -223,7 +223,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     """
     from wholearm_tools.fit import fit_primitive
     from wholearm_tools.fit.gate import lying_flat, report_gate
-    from wholearm_tools.fit.infer import DEFAULT_KINDS, infer
+    from wholearm_tools.fit.infer import DEFAULT_KINDS, infer, reading_posterior
     from wholearm_tools.fit.models import MODELS
     from wholearm_tools.fit.policy import FitPolicy
     from wholearm_tools.fit.readings import readings_from_contacts
@@ -331,7 +331,11 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     if rd.n_contacts >= need and not primitives:
         messages.append("no primitive both explains more contacts than it has parameters and "
                         "is determined by them")
-    # the classification after the fit: each contact's posterior over its readings
+    # the classification after the fit: each contact's posterior over its readings under its
+    # primitive, at the kinematic error sigma_kin (as the gate): readings whose residuals differ
+    # by less than the arm's kinematic errors (a tip at the seam of its link's side and an
+    # equal sphere) are not told apart by the map and keep their prior odds (eq. 2)
+    post_kin = reading_posterior(rd, np.nan_to_num(inf.residual, nan=0.0), sigma_kin)
     p_map = table.p_tip.copy()
     link_map = table.link.copy()
     for k, row in enumerate(reps):
@@ -339,7 +343,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         if assignment[row] < 0:
             continue
         dup = group == group[row]
-        p_map[dup] = float(np.sum(inf.posterior[rows_k][rd.sphere[rows_k]]))
+        p_map[dup] = float(np.sum(post_kin[rows_k][rd.sphere[rows_k]]))
         link_map[dup] = int(rd.link[inf.reading[k]])
     from wholearm_tools.classify.tip import labels_from_p_tip
 

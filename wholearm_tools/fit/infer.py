@@ -108,7 +108,8 @@ class Inference:
     by (its prior-best where unexplained); ``posterior (R,)``: each reading's posterior
     probability (over the readings of its contact) under the assigned primitive (the prior
     where unexplained); ``sigma``: the noise level; ``score``: the final description length;
-    ``extent``: the scene size; ``history``: the score after each round.
+    ``extent``: the scene size; ``history``: the score after each round; ``residual (R,)``:
+    each reading's residual under its contact's assigned primitive (NaN where unexplained).
     """
 
     selected: tuple[Hypothesis, ...]
@@ -120,6 +121,7 @@ class Inference:
     extent: float
     history: tuple[float, ...] = ()
     messages: tuple[str, ...] = field(default_factory=tuple)
+    residual: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -130,6 +132,16 @@ def _logsumexp_by_contact(v: FloatArray, starts: IntArray) -> FloatArray:
     mx = np.maximum.reduceat(v, starts)
     n_per = np.diff(np.r_[starts, len(v)])
     return mx + np.log(np.add.reduceat(np.exp(v - np.repeat(mx, n_per)), starts))
+
+
+def reading_posterior(readings: Readings, residual: FloatArray, sigma: float) -> FloatArray:
+    """Posterior probability of each reading over the readings of its contact, from its
+    prior and its ``residual`` [m] at noise level ``sigma`` (zero for an infinite residual)."""
+    with np.errstate(over="ignore"):    # a residual far beyond sigma: probability zero
+        z = np.asarray(residual, dtype=float) / sigma
+        v = readings.log_prior - 0.5 * z * z
+    lse = _logsumexp_by_contact(v, readings.starts)
+    return np.exp(v - lse[readings.contact])
 
 
 def truncated_sigma(r: ArrayLike, start: float, k: float, rounds: int = 30) -> float:
@@ -254,10 +266,7 @@ class Scorer:
 
     def posterior(self, h: Hypothesis) -> FloatArray:
         """Posterior probability of each reading given that ``h`` explains its contact."""
-        z = self.residuals(h) / self.sigma
-        v = self.readings.log_prior - 0.5 * z * z
-        lse = _logsumexp_by_contact(v, self.readings.starts)
-        return np.exp(v - lse[self.readings.contact])
+        return reading_posterior(self.readings, self.residuals(h), self.sigma)
 
     def best_reading(self, h: Hypothesis) -> IntArray:
         """Each contact's most probable reading under ``h``, ``(M,)`` reading indices."""
@@ -726,7 +735,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     extent = float(np.linalg.norm(pts_all.max(axis=0) - pts_all.min(axis=0))) if m_all else 0.0
     empty = Inference((), np.full(m_all, -1), np.zeros(m_all, dtype=np.int64),
                       np.exp(readings.log_prior), float(policy.noise or noise_floor), 0.0,
-                      extent)
+                      extent, residual=np.full(len(readings), np.nan))
     min_need = min(MODELS[k].dof for k in kinds) + 2
     if m_all < min_need or extent <= 0:
         return empty
@@ -976,14 +985,16 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     assign = scorer.assign(chosen)
     reading = prior_best.copy()
     posterior = np.exp(readings.log_prior)
+    residual = np.full(len(readings), np.nan)
     for i, h in enumerate(chosen):
         mem = assign == i
         reading[mem] = scorer.best_reading(h)[mem]
         post = scorer.posterior(h)
         rows = np.isin(readings.contact, np.flatnonzero(mem))
         posterior[rows] = post[rows]
+        residual[rows] = h.res[rows]
     return Inference(tuple(chosen), assign, reading, posterior, scorer.sigma, history[-1], extent,
-                     tuple(history), tuple(messages))
+                     tuple(history), tuple(messages), residual)
 
 
 def _restricted_order(order: IntArray, allowed: IntArray) -> IntArray:
