@@ -11,13 +11,15 @@ from wholearm_tools.logs.records import JointLog
 
 
 def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_noise=0.003,
-                  differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8):
+                  differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8, fling=None):
     """A guarded-move impedance log: ``moves`` = list of (target (n,), {joint: block_time}).
 
     Each move drives the commanded position toward ``target`` at ``speed`` rad/s per joint; a
     joint listed in the block mapping freezes at that time (contact) while its command goes on;
     after the move has settled for 0.1 s the command returns to the start (retreat) and the
-    blocks are released.
+    blocks are released.  ``fling`` ``(n,)`` rad/s: the impact of each block throws the arm at
+    that velocity for 30 ms (a rebound of the blocked joints, the outer ones flung on) before
+    the blocked joints come to rest and the others' controllers pull them back.
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate
@@ -27,11 +29,16 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     t = 0.0
     ts = []
 
+    kick = np.zeros(n)
+    kick_until = -1.0
+
     def step(target, blocked):
         nonlocal t, q, qc
         qc = qc + np.clip(target - qc, -speed * dt, speed * dt)
         new = q + (qc - q) * (1 - np.exp(-dt / 0.02))
         new[blocked] = q[blocked]
+        if t < kick_until:
+            new += kick * dt
         qd_true = (new - q) / dt
         q = new
         ts.append(t)
@@ -50,8 +57,11 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
         settled = 0
         while settled < round(0.1 * rate):
             for j, tb in blocks.items():
-                if t - t0 >= tb:
+                if t - t0 >= tb and not blocked[j]:
                     blocked[: j + 1] = True  # joints 0..j stop when link j touches
+                    if fling is not None:
+                        kick = np.asarray(fling, float)
+                        kick_until = t + 0.03
             step(target, blocked)
             if np.all(blocked | (np.abs(rows_qd[-1]) < 1e-3)) and (
                     np.any(blocked) or np.allclose(q, target, atol=1e-3)):
@@ -88,6 +98,17 @@ def test_single_contacts_identify_the_link():
     assert np.all(c.t_end > c.t)
     # motion just before the stop is positive on the joints that moved
     assert np.all(c.qd_before[0, :2] > 0.3)
+
+
+def test_the_approach_is_measured_before_the_impact_not_during_it():
+    """Only joint 0 drives into the contact; the impact bounces it back and flings joints 1
+    and 2 on at 1 rad/s for 30 ms before the arm comes to rest.  The motion that led into the
+    contact (eq. 2's velocity, the rigid-group choice's levers) is joint 0's alone."""
+    log = impedance_log([([0.6, 0.0, 0.0], {0: 0.4})], fling=[-0.5, 1.0, 1.0])
+    c = detect_contacts(log)
+    assert c.link.tolist() == [0]
+    assert c.qd_before[0, 0] > 0.5
+    assert np.all(np.abs(c.qd_before[0, 1:]) < 0.05)
 
 
 def test_reaching_the_target_is_not_a_contact():

@@ -67,7 +67,9 @@ class DetectionParams:
         Width in seconds of the centred moving average applied to ``qd`` (at least one sample,
         so a 50 Hz log is not smoothed).
     before_time : float
-        Window in seconds before the first obstruction over which ``qd_before`` is averaged.
+        Window in seconds before the impact (the end of the obstructed joints' free motion,
+        at most ``release_time`` before the first obstruction) over which ``qd_before`` is
+        averaged.
     rigid_outer : bool
         The joints beyond the outermost obstructed joint ``n`` carry no load, so links beyond
         ``n`` may have touched.  True (default): choose among them (see ``rigid_choice``);
@@ -135,8 +137,9 @@ class Contacts:
     q : (M, n) float
         Joint positions where the contact settled (median over the first samples from there).
     qd_before : (M, n) float
-        Joint velocities just before the stop (joints that were already at rest set to 0); the
-        motion direction that eq. (2) integrates against.
+        Joint velocities just before the impact (joints that were already at rest set to 0):
+        the motion that led into the contact, which eq. (2) integrates against, not the bounce
+        between impact and rest.
     t_end : (M,) float
         End of the blocked state (the retreat), seconds.
     velocity_threshold, torque_threshold : (n,) float
@@ -629,11 +632,23 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     links = np.empty(M, dtype=np.int64)
     groups: list[tuple[int, int, int]] = []   # (row, innermost link, outermost link)
     by_map = params.rigid_choice == "map" and robot is not None
+    # the motion that led into a contact is measured before its impact: the obstruction is
+    # confirmed only once the joints have come to rest, and in between the impact (a bounce,
+    # the outer joints flung on) is no approach.  The impact begins where the free motion of
+    # the joints it obstructed ends (moving, as the free-motion model predicts, for longer
+    # than the velocity's smoothing window: a bounce passes through free motion only for
+    # moments the smoothed velocity does not resolve); looking back at most one release time
     for i, e in enumerate(events):
         s_, k_ = e.start, e.settle
         settled = q[k_:min(k_ + min_len, e.end)]
         out_q[i] = np.median(settled, axis=0)
-        lo, hi = max(0, s_ - lag - nb), max(1, s_ - lag)
+        back = max(0, s_ - lag - release)
+        obs = list(e.obstructed)
+        free = ev.drop_short(np.any(free_moving[back:max(back, s_ - lag), obs], axis=1),
+                             width + 1)
+        onset = np.flatnonzero(free)
+        on = back + int(onset[-1]) + 1 if len(onset) else max(0, s_ - lag)
+        lo, hi = max(0, on - nb), max(1, on)
         out_qd[i] = qd[lo:hi].mean(axis=0)
         at_rest = np.all(stopped[lo:hi], axis=0)  # already at rest before this contact
         out_qd[i, at_rest] = 0.0
