@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -55,8 +57,6 @@ def test_too_few_contacts_is_a_message_not_an_error():
 
 
 def test_collinear_contacts_give_a_line_and_never_a_circle():
-    import dataclasses
-
     x = np.linspace(0.0, 0.4, 12)
     tips = np.stack([x, np.full_like(x, 0.3)], axis=1)
     # each tip's link comes from the free side below the wall (a link lying along the wall
@@ -250,8 +250,6 @@ def test_map_label_decides_only_beyond_the_kinematic_error(reach, label):
     (0.5 mm) that difference does not tell the readings apart, and the map keeps the
     ambiguity; with those of a 0.1 m arm (0.05 mm, below the 0.1 mm noise floor) the side
     reading wins."""
-    import dataclasses
-
     c, r, w = np.array([0.3, 0.2]), 0.08, 0.01
     tips = _circle_tips(14, centre=tuple(c), r=r, w=w)
     ang = 0.3

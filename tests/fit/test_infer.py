@@ -6,7 +6,15 @@ import pytest
 from fit_synth import contacts, param_error, planar_scene
 from fit_synth import truth as fit_synth_truth
 
-from wholearm_tools.fit import FitData, FitPolicy, infer, readings_from_contacts, report_gate
+from wholearm_tools.fit import (
+    FitData,
+    FitPolicy,
+    Readings,
+    infer,
+    lying_flat,
+    readings_from_contacts,
+    report_gate,
+)
 from wholearm_tools.fit.core import fit_primitive
 
 
@@ -184,9 +192,6 @@ def test_report_gate_leaves_out_of_the_type_test_a_link_lying_flat(lying_flat_li
     curved at B anywhere along it: the contact says nothing of the curvature, and the line's
     type is not determined.  When each link comes in steeply, the sphere is where it touched,
     and seven such points spread over 7 cm tell a wall from a post of radius B."""
-    from wholearm_tools.fit import lying_flat
-    from wholearm_tools.fit.readings import Readings
-
     w, B, sigma_kin = 0.02, 0.03, 3e-4
     u = np.linspace(-0.035, 0.035, 7)
     centre = np.c_[u, np.full(7, 0.3 - w)]
