@@ -11,11 +11,12 @@ from wholearm_tools.fit import (
     FitPolicy,
     Readings,
     infer,
+    influence,
     lying_flat,
     readings_from_contacts,
     report_gate,
 )
-from wholearm_tools.fit.core import fit_primitive
+from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
 
 
 def _readings(d: FitData, p_tip_tips: float = 0.9, p_tip_links: float = 0.1,
@@ -247,3 +248,23 @@ def test_a_surface_no_seeded_type_fits_is_selected_as_its_own_richer_type(kind):
     inf = infer(rd, B=0.02, noise_floor=1e-4, free_points=d.free_points, rng=0)
     assert [h.kind for h in inf.selected] == [kind]
     assert param_error(kind, inf.selected[0].fit.params, p) < 5e-3
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_influence_singles_out_the_contact_a_fit_bends_towards(seed):
+    """A bore touched on a short ring, and once 5 mm off its wall far up (a contact on the rim
+    of a side opening): the fit through all of them tilts by degrees to fit that contact, and
+    its Cook's distance stands out; on the ring alone no contact moves the fit that far."""
+    rng = np.random.default_rng(seed)
+    az = rng.uniform(0.0, 2.0 * np.pi, 14)
+    ring = np.c_[0.14 * np.cos(az), 0.14 * np.sin(az), rng.uniform(-0.04, 0.04, 14)]
+    ring += rng.normal(0.0, 3e-4, ring.shape)
+    cooks = []
+    for pts in (ring, np.vstack([ring, [[0.135, 0.0, 0.1]]])):
+        d = FitData.create(tip_points=pts, tip_radius=np.full(len(pts), 0.02), dim=3)
+        fit = fit_primitive("cylinder", d)
+        r, _ = residuals_and_touch("cylinder", fit.params, d, fit.free_side)
+        cooks.append(influence(fit, d, r))
+    clean, bent = cooks
+    assert int(np.argmax(bent)) == len(bent) - 1
+    assert bent[-1] > 2.0 * max(1.0, clean.max(), np.sort(bent)[-2])

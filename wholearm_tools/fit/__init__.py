@@ -8,12 +8,13 @@ Public API
 :func:`readings_from_contacts`   contacts as mixtures of readings -> :class:`Readings`
 :func:`infer`             hypotheses, one score, selection -> :class:`Inference`
 :func:`report_gate`       covariance under a kinematic error model -> :class:`GateResult`
+:func:`influence`         each contact's Cook's distance on a fit
 :class:`FitPolicy`        every parameter of the loop in one frozen record
 """
 
 from wholearm_tools.fit.core import LOSSES, cost, fit_primitive, residuals
 from wholearm_tools.fit.data import FitData, weight_from_tip_probability
-from wholearm_tools.fit.gate import GateResult, lying_flat, report_gate
+from wholearm_tools.fit.gate import GateResult, influence, lying_flat, report_gate
 from wholearm_tools.fit.infer import Inference, infer
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings, readings_from_contacts
@@ -30,6 +31,7 @@ __all__ = [
     "cost",
     "fit_primitive",
     "infer",
+    "influence",
     "lying_flat",
     "readings_from_contacts",
     "report_gate",

@@ -134,6 +134,28 @@ def lying_flat(fit: FitResult, readings: Readings, contacts: IntArray, tol: floa
     return np.isin(contacts, readings.contact[rows[flat]])
 
 
+def influence(fit: FitResult, data: FitData, residual: ArrayLike) -> np.ndarray:
+    """Cook's distance of each row of ``data`` (tips first; ``residual`` in that order): how
+    far leaving that contact out would move ``fit``, in units of the fit's own uncertainty,
+    ``r_i^2 / (p s^2) * h_ii / (1 - h_ii)^2`` with ``h_ii`` the contact's leverage on the
+    type's minimal parameterisation.  A fit bent towards one contact fits that contact
+    closely (a small residual) at a large leverage.  Zeros for degenerate data."""
+    r = np.asarray(residual, dtype=float)
+    touch = _touch_rows(fit, data)
+    if touch is None:
+        return np.zeros(len(r))
+    rows, _, scale = touch
+    n, p = rows.shape
+    if n <= p:
+        return np.zeros(n)
+    lev = np.einsum("ij,ij->i", rows @ np.linalg.pinv(rows.T @ rows), rows)
+    z = r / scale
+    s2 = float(z @ z) / (n - p)
+    if s2 <= 0:
+        return np.zeros(n)
+    return z * z / (p * s2) * lev / np.clip(1.0 - lev, 1e-12, None) ** 2
+
+
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
                 B: float | None = None, open_touch: ArrayLike | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test

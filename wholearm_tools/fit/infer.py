@@ -25,9 +25,10 @@ Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled 
 neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
 unions of two selected primitives (as either's type, and for neighbours as a richer one),
-every other type on a selected one's contacts, seeds at a selected one's unexplained
-neighbours (among its contacts and the unexplained ones), and new seeds among the contacts
-left unexplained.
+every other type on a selected one's contacts, its most influential contact (Cook's distance)
+read by each of its other readings and left out (and so on down that chain), seeds at a
+selected one's unexplained neighbours (among its contacts and the unexplained ones), and new
+seeds among the contacts left unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
 single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
@@ -49,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
+from wholearm_tools.fit.gate import influence
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings
@@ -780,25 +782,29 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return scorer.score(Hypothesis(kind, fit, np.asarray(members), np.asarray(reading),
                                        origin))
 
-    fitted: dict[tuple[str, bool, bytes], Hypothesis | None] = {}
+    fitted: dict[tuple[str, bytes, object], Hypothesis | None] = {}
 
     def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None,
-              cold: bool = False) -> Hypothesis | None:
+              cold: bool = False, reread: tuple[int, int] | None = None) -> Hypothesis | None:
         """``h`` (or a ``kind`` fitted from scratch, or with ``cold`` ``h``'s own kind from
         scratch) refitted on ``members``, each by its most probable reading under ``h`` with
-        its posterior as weight; once per reading set.  A fit from scratch has a seed's
+        its posterior as weight (``reread`` ``(k, r)``: member ``k`` by reading ``r`` instead,
+        at full weight); once per reading set and start.  A fit from scratch has a seed's
         iteration budget: a type that does not describe these contacts (a cone on a post's,
         degenerating towards the cylinder) does not converge, and is not worth finishing."""
         kind = kind or h.kind
         if len(members) < MODELS[kind].dof + 1:
             return None
         best = scorer.best_reading(h)[members]
+        weight = np.maximum(scorer.posterior(h)[best], 0.05)
+        if reread is not None:
+            best[reread[0]], weight[reread[0]] = reread[1], 1.0
         warm = kind == h.kind and not cold
-        key_ = (kind, warm, best.tobytes())
+        # a warm fit is a proposal of its start as much as of its readings
+        key_ = (kind, best.tobytes(), identity(h)[3] if warm else None)
         if key_ not in fitted:
-            post = scorer.posterior(h)[best]
-            f = fit_readings(kind, readings, best, np.maximum(post, 0.05),
-                             start=h.fit if warm else None, free_points=free,
+            f = fit_readings(kind, readings, best, weight, start=h.fit if warm else None,
+                             free_points=free,
                              max_iter=200 if warm else policy.proposal_iterations)
             fitted[key_] = make(kind, f, members, best, origin)
         return fitted[key_]
@@ -927,6 +933,30 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
                     extra.append(refit(h, mem, "other type" if k != h.kind else "cold refit",
                                        kind=k, cold=True))
+            # the member with the most influence on it (Cook's distance) read otherwise: by
+            # each of its other readings, and as an outlier, and so on down that chain.  A fit
+            # bent towards one contact's reading (a side read as the sphere, a contact on an
+            # edge or on another surface) fits that contact closely and the others worse, and
+            # assignment and warm refits keep it there; without the contact it is fitted from
+            # scratch
+            g, g_mem = h, mem
+            while len(g_mem) > g.dof + 1:
+                cook = _influence(g, g_mem, scorer, readings)
+                k_ = int(np.argmax(cook))
+                if not cook[k_] > policy.influence_limit:
+                    break
+                c_ = int(g_mem[k_])
+                current_row = int(scorer.best_reading(g)[c_])
+                for row in np.flatnonzero(readings.contact == c_):
+                    u = (refit(g, g_mem, "re-reading", reread=(k_, int(row)))
+                         if row != current_row else None)
+                    if u is not None:
+                        extra.append(grow(u))
+                g = refit(g, np.delete(g_mem, k_), "influence", cold=True)
+                if g is None:
+                    break
+                extra.append(grow(g))
+                g_mem = g.members
             for j in range(i + 1, len(chosen)):
                 other = np.flatnonzero(assign == j)
                 union = np.union1d(mem, other)
@@ -995,6 +1025,16 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         residual[rows] = h.res[rows]
     return Inference(tuple(chosen), assign, reading, posterior, scorer.sigma, history[-1], extent,
                      tuple(history), tuple(messages), residual)
+
+
+def _influence(h: Hypothesis, members: IntArray, scorer: Scorer, readings: Readings
+               ) -> FloatArray:
+    """Cook's distance of each of ``members`` on ``h``, each by its most probable reading."""
+    rows = scorer.best_reading(h)[members]
+    pos = Readings.fit_order(readings.sphere[rows])
+    res = np.empty(len(rows))
+    res[pos] = scorer.residuals(h)[rows]
+    return influence(h.fit, readings.fit_data(rows), res)[pos]
 
 
 def _restricted_order(order: IntArray, allowed: IntArray) -> IntArray:

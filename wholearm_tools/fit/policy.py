@@ -44,6 +44,10 @@ class FitPolicy:
         not worth finishing (refits warm-started from a selected primitive get 200).
     minimal_set_iterations : solver iterations of a consensus hypothesis (a minimal set fitted
         exactly): it only has to be close enough for the inlier test.
+    influence_limit : a selected primitive's member whose Cook's distance exceeds this is
+        proposed as an outlier (the primitive refitted without it, and so on down that chain):
+        1 is the classical mark of a contact that alone moves the fit out of its own 50 %
+        confidence region (``math.inf``: no such proposals).
     rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
     em_rounds : most assign -> refit -> select iterations.
     neighbours : contacts per contact in the growth graph.
@@ -83,6 +87,7 @@ class FitPolicy:
     consensus_trials: int = 12
     proposal_iterations: int = 30
     minimal_set_iterations: int = 20
+    influence_limit: float = 1.0
     rounds: int = 3
     em_rounds: int = 6
     neighbours: int = 6
@@ -104,5 +109,7 @@ class FitPolicy:
                      "minimal_set_iterations", "rounds", "em_rounds", "neighbours"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
+        if not self.influence_limit > 0:
+            raise InputError(f"influence_limit must be positive, got {self.influence_limit!r}")
         if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):
             raise InputError(f"noise must be a positive length, got {self.noise!r}")
