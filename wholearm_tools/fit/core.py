@@ -546,7 +546,7 @@ def _votes(m: Model, th: np.ndarray, pts: np.ndarray, tol: float) -> tuple[int, 
     return int(np.sum(sd > tol)), int(np.sum(sd < -tol))
 
 
-def _decide_side(m: Model, nd: _Norm, quick: bool = False
+def _decide_side(m: Model, nd: _Norm, local: np.ndarray, quick: bool = False
                  ) -> tuple[list[float], list[np.ndarray] | None]:
     """Free-side candidates.  A single side when the free-space hints right behind the contacts
     (:func:`_local_hints`: robot positions and link axes, which are in free space) all lie
@@ -554,7 +554,7 @@ def _decide_side(m: Model, nd: _Norm, quick: bool = False
     on the fitted surfaces.  Far hints are not trusted against a guess: an algebraic guess
     from a patch is good near the patch only, and a hint far from it can lie on either side.
     Also the initial guesses made for side +1 on the way (None when none were made), for the
-    fit to reuse."""
+    fit to reuse.  ``local``: :func:`_local_hints` of ``nd``."""
     no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
     if no_radius and len(nd.free) == 0:
         return [1.0], None  # sharp tip, no links, no hints: the side does not change the fit
@@ -564,7 +564,6 @@ def _decide_side(m: Model, nd: _Norm, quick: bool = False
     finite = [c for c in cands if np.all(np.isfinite(c))]
     if not finite:
         return [1.0, -1.0], cands
-    local = _local_hints(nd)
     if len(local):
         th = min(finite, key=lambda c: _cost_norm(m, c, 1.0, nd, "linear", 1.0))
         out, inn = _votes(m, th, local, 0.05)
@@ -596,14 +595,13 @@ def _local_hints(nd: _Norm) -> np.ndarray:
     return near[d2 <= r * r]
 
 
-def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve]) -> float:
+def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve], local: np.ndarray) -> float:
     """Choose between the fits made with either free side: converged first, then the fewer
     free-space hints (free points, link axes) on the wrong side of the fitted surface, then the
-    lower cost, then the side of the base-frame origin (where the robot stands), then +1."""
+    lower cost, then the side of the base-frame origin (where the robot stands), then +1.
+    ``local``: :func:`_local_hints` of ``nd``."""
     hints = np.vstack([nd.free, nd.a, nd.b])
     origin = (-nd.mu / nd.scale)[None, :]
-
-    local = _local_hints(nd)
 
     def key(side: float) -> tuple[float, ...]:
         f = fits[side]
@@ -744,12 +742,14 @@ def fit_primitive(
 
     # lines and planes: the free side is the side the fitted normal points to
     guesses_plus = None  # the type's initial guesses for side +1, once made
+    local = None         # the free-space hints right behind the contacts, once found
     if m.linear and initial is not None:
         sides = [1.0]  # the initial normal points to free space
     elif free_side is not None and not m.linear:
         sides = [float(free_side)]
     else:
-        sides, guesses_plus = _decide_side(m, nd, quick)
+        local = _local_hints(nd)
+        sides, guesses_plus = _decide_side(m, nd, local, quick)
     fits: dict[float, _Solve] = {}
     deltas: dict[float, float] = {}
     outliers: dict[float, np.ndarray] = {}
@@ -805,7 +805,8 @@ def fit_primitive(
             consider(sol)
     if not fits:
         return fail("not_run", f"no initial guess could be formed for a {kind} from these data")
-    side = next(iter(fits)) if len(fits) == 1 else _pick_side(m, nd, fits)
+    side = (next(iter(fits)) if len(fits) == 1 else
+            _pick_side(m, nd, fits, _local_hints(nd) if local is None else local))
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
                         covariance=covariance, outliers=outliers.get(side),
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
