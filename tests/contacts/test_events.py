@@ -51,3 +51,28 @@ def test_a_load_on_joints_that_did_not_move_is_no_contact():
     obs, mov, free, drag = _masks()
     obs[100:200, 2] = True                   # loaded but held all along (inertia)
     assert segment_events(obs, mov, free, MIN_LEN, RELEASE, drag) == []
+
+
+def test_the_link_is_the_last_to_stop_even_when_it_slides_on_under_the_load():
+    """The inner joints hold against the contact while the wrist keeps turning, slowed, pushing
+    along its motion (the tip sliding on the surface): the wrist's link is in contact.  A
+    wrist that pushes beyond the free-motion model only for moments as the inner joints come
+    to rest (catching up with its reference), or only before they do (another contact, since
+    left), does not name its link."""
+    obs, mov, free, drag = _masks()
+    mov[20:100] = free[20:100] = True        # the approach
+    obs[100:300, :2] = True                  # shoulder and elbow held from 100 ...
+    mov[100:300, 2] = True                   # ... the wrist slides on under the load
+    drag[100:300, 2] = True
+    events = segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)
+    assert [(e.start, e.end, e.link) for e in events] == [(100, 300, 2)]
+    assert segment_events(obs, mov, free, MIN_LEN, RELEASE)[0].link == 1
+    # the wrist moves freely once the inner joints are held, after pushing for a moment
+    drag[115:300, 2] = False
+    free[115:300, 2] = True
+    assert segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)[0].link == 1
+    # the elbow comes to rest only at 200; the wrist dragged until 180
+    obs[100:200, 1] = False
+    drag[100:180, 2] = True
+    free[100:180, 2] = False
+    assert segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)[0].link == 1

@@ -20,7 +20,10 @@ unloads for a moment while the tip slides), and at least ``min_stop_time`` of it
 link is the outermost joint obstructed during it — the paper's "last one to stop": joints
 outward of the link in contact carry no part of the force — unless that joint, while still
 moving, moved freely (its torque within the free-motion model) before it stopped against a
-second obstacle: the two are then two contacts, the second starting there.  The event is
+second obstacle: the two are then two contacts, the second starting there.  A joint outward
+of it that slides on while the obstructed ones are held, pushing along its motion beyond the
+free-motion model for most of that time (a tip sliding on under the load, slowed but not
+stopped), is the last one to stop: the link is then at least its link.  The event is
 measured where it settles: once every joint it obstructs has stopped.
 
 Noise levels come from second differences, which a smooth motion does not reach, so they do
@@ -318,8 +321,20 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
             joints = tuple(int(j) for j in np.flatnonzero(obstructed[a:b].any(axis=0)))
             if not joints:
                 continue
-            link = max(joints)
             # settles once every joint it obstructs has been obstructed
             first = [a + int(np.flatnonzero(obstructed[a:b, j])[0]) for j in joints]
-            out.append(Event(a, b, link, min(max(first), b - 1), joints))
+            settle = min(max(first), b - 1)
+            # the link in contact is the last one to stop: a joint outward of the obstructed
+            # ones that slides on while they are held, pushing along its motion beyond the
+            # free-motion model for most of that time (a tip sliding on under the load), is
+            # loaded by the contact too, which lies on its link or beyond.  A joint that only
+            # catches up with its reference as the others stop (its coupled inertia changed)
+            # does so for moments
+            link = max(joints)
+            if dragging is not None:
+                held_for = b - settle
+                slid = (np.count_nonzero(dragging[settle:b], axis=0)
+                        >= max(min_len, 0.5 * held_for))
+                link = max([link, *np.flatnonzero(slid).tolist()])
+            out.append(Event(a, b, link, settle, joints))
     return out
