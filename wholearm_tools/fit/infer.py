@@ -796,13 +796,15 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         if len(members) < MODELS[kind].dof + 1:
             return None
         best = scorer.best_reading(h)[members]
-        weight = np.maximum(scorer.posterior(h)[best], 0.05)
         if reread is not None:
-            best[reread[0]], weight[reread[0]] = reread[1], 1.0
+            best[reread[0]] = reread[1]
         warm = kind == h.kind and not cold
         # a warm fit is a proposal of its start as much as of its readings
         key_ = (kind, best.tobytes(), identity(h)[3] if warm else None)
         if key_ not in fitted:
+            weight = np.maximum(scorer.posterior(h)[best], 0.05)
+            if reread is not None:
+                weight[reread[0]] = 1.0
             f = fit_readings(kind, readings, best, weight, start=h.fit if warm else None,
                              free_points=free,
                              max_iter=200 if warm else policy.proposal_iterations)
@@ -941,15 +943,14 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             # scratch
             g, g_mem = h, mem
             while len(g_mem) > g.dof + 1:
-                cook = _influence(g, g_mem, scorer, readings)
+                rows = scorer.best_reading(g)[g_mem]
+                cook = _influence(g, rows, scorer.residuals(g)[rows], readings)
                 k_ = int(np.argmax(cook))
                 if not cook[k_] > policy.influence_limit:
                     break
-                c_ = int(g_mem[k_])
-                current_row = int(scorer.best_reading(g)[c_])
-                for row in np.flatnonzero(readings.contact == c_):
+                for row in np.flatnonzero(readings.contact == g_mem[k_]):
                     u = (refit(g, g_mem, "re-reading", reread=(k_, int(row)))
-                         if row != current_row else None)
+                         if row != rows[k_] else None)
                     if u is not None:
                         extra.append(grow(u))
                 g = refit(g, np.delete(g_mem, k_), "influence", cold=True)
@@ -1027,13 +1028,12 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                      tuple(history), tuple(messages), residual)
 
 
-def _influence(h: Hypothesis, members: IntArray, scorer: Scorer, readings: Readings
+def _influence(h: Hypothesis, rows: IntArray, residual: FloatArray, readings: Readings
                ) -> FloatArray:
-    """Cook's distance of each of ``members`` on ``h``, each by its most probable reading."""
-    rows = scorer.best_reading(h)[members]
+    """Cook's distance on ``h`` of each of its members, read by ``rows`` with ``residual``."""
     pos = Readings.fit_order(readings.sphere[rows])
     res = np.empty(len(rows))
-    res[pos] = scorer.residuals(h)[rows]
+    res[pos] = residual
     return influence(h.fit, readings.fit_data(rows), res)[pos]
 
 
