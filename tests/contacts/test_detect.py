@@ -11,7 +11,8 @@ from wholearm_tools.logs.records import JointLog
 
 
 def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_noise=0.003,
-                  differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8, fling=None):
+                  differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8, fling=None,
+                  creep=None):
     """A guarded-move impedance log: ``moves`` = list of (target (n,), {joint: block_time}).
 
     Each move drives the commanded position toward ``target`` at ``speed`` rad/s per joint; a
@@ -19,7 +20,9 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     after the move has settled for 0.1 s the command returns to the start (retreat) and the
     blocks are released.  ``fling`` ``(n,)`` rad/s: the impact of each block throws the arm at
     that velocity for 30 ms (a rebound of the blocked joints, the outer ones flung on) before
-    the blocked joints come to rest and the others' controllers pull them back.
+    the blocked joints come to rest and the others' controllers pull them back.  ``creep``
+    rad/s: the joint of the link in contact is not stopped but held back, creeping on at that
+    speed towards its command (negative: pushed back, away from it).
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate
@@ -32,11 +35,15 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     kick = np.zeros(n)
     kick_until = -1.0
 
+    creeping = np.zeros(n, bool)
+
     def step(target, blocked):
         nonlocal t, q, qc
         qc = qc + np.clip(target - qc, -speed * dt, speed * dt)
         new = q + (qc - q) * (1 - np.exp(-dt / 0.02))
         new[blocked] = q[blocked]
+        if creeping.any():
+            new[creeping] = q[creeping] + creep * dt * np.sign(qc - q)[creeping]
         if t < kick_until:
             new += kick * dt
         qd_true = (new - q) / dt
@@ -57,15 +64,18 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
         settled = 0
         while settled < round(0.1 * rate):
             for j, tb in blocks.items():
-                if t - t0 >= tb and not blocked[j]:
+                if t - t0 >= tb and not blocked[j] and not creeping[j]:
                     blocked[: j + 1] = True  # joints 0..j stop when link j touches
+                    if creep is not None:
+                        blocked[j], creeping[j] = False, True
                     if fling is not None:
                         kick = np.asarray(fling, float)
                         kick_until = t + 0.03
             step(target, blocked)
-            if np.all(blocked | (np.abs(rows_qd[-1]) < 1e-3)) and (
+            if np.all(blocked | creeping | (np.abs(rows_qd[-1]) < 1e-3)) and (
                     np.any(blocked) or np.allclose(q, target, atol=1e-3)):
                 settled += 1
+        creeping[:] = False
         while not np.allclose(q, start, atol=1e-3):
             step(start, np.zeros(n, bool))
         for _ in range(round(0.1 * rate)):
@@ -109,6 +119,19 @@ def test_the_approach_is_measured_before_the_impact_not_during_it():
     assert c.link.tolist() == [0]
     assert c.qd_before[0, 0] > 0.5
     assert np.all(np.abs(c.qd_before[0, 1:]) < 0.05)
+
+
+def test_a_joint_the_contact_holds_back_without_stopping_it_names_the_link():
+    """The tip touches: shoulder and elbow stop, and the wrist, its torque against the load
+    growing, is pushed back at 0.1 rad/s (an eighth of its speed) by the tip sliding on the
+    surface.  It never comes to rest and never pushes along its motion, yet its link is the one
+    in contact.  (A wrist that runs on at its own speed when the elbow's link touches is not
+    held back: the first move of ``test_single_contacts_identify_the_link``, link 1.)"""
+    for seed in range(3):
+        log = impedance_log([([0.6, 0.5, 0.4], {2: 0.35})], creep=-0.1, seed=seed)
+        c = detect_contacts(log)
+        assert c.link.tolist() == [2]
+        assert c.qd_before[0, 2] > 0.3
 
 
 def test_reaching_the_target_is_not_a_contact():

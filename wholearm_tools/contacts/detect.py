@@ -20,7 +20,7 @@ them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -535,6 +535,24 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
     return out, se
 
 
+def _held_back_link(e: Any, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
+                    qd_before: FloatArray, min_len: int) -> int:
+    """The link of event ``e``, or the outermost joint the contact holds back without
+    stopping it, if that lies outward.  Such a joint creeps on while the contact holds the inner
+    ones (friction in the joint or at the contact, a compliant contact): it moves, but loaded
+    beyond the free-motion model most of that time, and from the moment the event settles at
+    less than half the speed that led into the contact (the impact slowed it).  A joint that
+    runs on at its own speed and is brought to rest by its controller afterwards (its torque
+    beyond the model as the inner joints stop: its coupled inertia changed) was not slowed by
+    the contact, and the contact is inward of it."""
+    k, end = e.settle, e.end
+    held_for = max(end - k, 1)
+    loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= max(min_len, 0.5 * held_for)
+    slowed = (np.median(np.abs(qd_s[k:min(k + min_len, end)]), axis=0)
+              <= 0.5 * np.abs(qd_before))
+    return max([int(e.link), *np.flatnonzero(loaded & slowed).tolist()])
+
+
 def _rigid_group(link: int, travel: FloatArray, resolution: FloatArray,
                  obstructed: tuple[int, ...]) -> int:
     """Outermost link of the rigid group of ``link``: joints beyond it that were not obstructed
@@ -611,6 +629,10 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     dragging = np.stack([ev.drop_short(~stopped[:, j] & (resid[:, j] * np.sign(qd_s[:, j])
                                                          > params.k_torque * fm.scale[j]),
                                        min_len) for j in range(n)], axis=1)
+    # moving with a torque beyond the free-motion model, either way (driving a slide, or held
+    # back): a joint the contact loads without stopping it (:func:`_held_back_link`)
+    loaded_moving = np.stack([ev.drop_short(~stopped[:, j] & ~free_moving[:, j], min_len)
+                              for j in range(n)], axis=1)
     events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": fm.rest_scale.tolist(),
             "sigma_torque_motion": fm.scale.tolist(),
@@ -656,6 +678,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         held[i] = (at_rest & np.all(stopped[h0:h1], axis=0) & ~np.any(loaded[h0:h1], axis=0))
         peak[i], _ = _stop_torques(resid, stopped, saturated, k_, max(e.end, k_ + 1),
                                    out_qd[i] != 0, held[i], h1, 5 * nb, fm.scale)
+        e = replace(e, link=_held_back_link(e, loaded_moving, qd_s, out_qd[i], min_len))
         links[i] = e.link
         if params.rigid_outer:
             if by_map:
