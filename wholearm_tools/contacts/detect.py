@@ -21,7 +21,7 @@ them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +29,9 @@ from numpy.typing import NDArray
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import JointLog
 from wholearm_tools.robot.model import RobotModel
+
+if TYPE_CHECKING:
+    from wholearm_tools.contacts.events import Event
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -535,7 +538,7 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
     return out, se
 
 
-def _held_back_link(e: Any, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
+def _held_back_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
                     qd_before: FloatArray, min_len: int) -> int:
     """The link of event ``e``, or the outermost joint the contact holds back without
     stopping it, if that lies outward.  Such a joint creeps on while the contact holds the inner
