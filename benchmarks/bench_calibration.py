@@ -4,7 +4,7 @@ For every scenario × seed: detect the contacts, compute P_T offline at the scen
 each detection with its true contact, and count per band of P_T the contacts and the share
 that were truly tip (or joint) contacts.  A calibrated P_T has the true rate near the band's
 mean.  The confident bands (P_T below 0.001 or at least 0.999) say how often a label eq. (2)
-is sure of is wrong: the fit's reading prior keeps that much weight on the other reading
+is sure of is wrong, against the weight the fit's reading prior keeps on the other reading
 (``wholearm_tools.fit.readings.P_TIP_CLIP``).
 
 Run:  .venv/bin/python benchmarks/bench_calibration.py [--engine physics] [--seeds 0-9]

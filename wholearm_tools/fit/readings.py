@@ -32,11 +32,8 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: tip probabilities are kept this far from 0 and 1: eq. (2) computed from a finite swept map
-#: is never certain, and a reading with prior 0 could not be revised by any evidence.  Of the
-#: labels eq. (2) is sure of (P_T below 0.001 or above 0.999) about one in a hundred is wrong
-#: on either simulator (``benchmarks/bench_calibration.py``): the other reading keeps that
-#: prior, so that a fit its residuals clearly favour can overrule the label
-P_TIP_CLIP = 1e-2
+#: is never certain, and a reading with prior 0 could not be revised by any evidence
+P_TIP_CLIP = 1e-3
 
 
 @dataclass(frozen=True, slots=True, eq=False)
