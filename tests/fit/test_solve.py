@@ -154,8 +154,9 @@ def test_null_space_is_an_orthonormal_basis_of_the_kernel(k):
     assert N.shape == (7, 7 - k)
     np.testing.assert_allclose(G @ N, 0.0, atol=1e-12)
     np.testing.assert_allclose(N.T @ N, np.eye(7 - k), atol=1e-12)
-    # a repeated row adds no constraint
+    # a repeated row adds no constraint, and no row none
     assert null_space(np.vstack([G, G[:1]])).shape == (7, 7 - k)
+    np.testing.assert_allclose(null_space(np.zeros((0, 7))), np.eye(7))
 
 
 def test_a_contact_at_the_start_centre_does_not_raise():
