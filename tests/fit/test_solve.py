@@ -159,6 +159,32 @@ def test_null_space_is_an_orthonormal_basis_of_the_kernel(k):
     np.testing.assert_allclose(null_space(np.zeros((0, 7))), np.eye(7))
 
 
+@pytest.mark.parametrize("kind", ["plane", "sphere", "cylinder", "cone"])
+def test_a_fit_solved_to_a_precision_stops_within_it_of_the_optimum(kind):
+    """Solved to a residual precision ``p`` (normalised units), LM stops in fewer iterations
+    and its cost is within ``p**2 / 2`` of the optimum's (the Gauss-Newton decrement it stops
+    at), so a score built on the residuals changes by less than that."""
+    fewer = 0
+    for draw in range(4):
+        rng = np.random.default_rng([23, draw])
+        p = truth(kind, rng)
+        data = contacts(kind, p, 16, 8, 1, rng, noise=0.003)
+        m = MODELS[kind]
+        nd = core._normalise(data)
+        th0 = core._raw_from_params(m, perturbed(p), nd)
+        args = (m, nd, th0, 1.0, "linear", 1.0, 200, core._link_t, core.rho_np,
+                core._irls_weight)
+        full = solve(*args)
+        prec = 0.1 * 0.003 / nd.scale     # a tenth of the noise
+        quick = solve(*args, precision=prec)
+        assert full.converged, draw
+        assert quick.converged, draw
+        assert quick.iterations <= full.iterations, draw
+        fewer += quick.iterations < full.iterations
+        assert full.cost - 1e-15 <= quick.cost <= full.cost + 0.5 * prec**2, draw
+    assert fewer >= 1
+
+
 def test_a_contact_at_the_start_centre_does_not_raise():
     """The distance to a circle is not differentiable at its centre: a start centred on a
     contact gives a non-finite Jacobian, and the fit reports instead of raising."""

@@ -420,12 +420,13 @@ def _solve_robust(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delt
 
 
 def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, delta: float,
-                max_iter: int) -> _Solve:
-    """Levenberg-Marquardt (:mod:`wholearm_tools.fit.solve`); IPOPT only for a solution on a
-    bound or inequality constraint (IPOPT handles the active set)."""
+                max_iter: int, precision: float = 0.0) -> _Solve:
+    """Levenberg-Marquardt (:mod:`wholearm_tools.fit.solve`, to ``precision``); IPOPT only
+    for a solution on a bound or inequality constraint (IPOPT handles the active set)."""
     from wholearm_tools.fit import solve as lm
 
-    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_t, rho_np, _irls_weight)
+    res = lm.solve(m, nd, th0, side, loss, delta, max_iter, _link_t, rho_np, _irls_weight,
+                   precision)
     finite = bool(np.all(np.isfinite(res.th)))
     if finite and not lm.on_bound(m, res.th):
         interior = (res.t > _T_EDGE) & (res.t < 1 - _T_EDGE)
@@ -643,6 +644,7 @@ def fit_primitive(
     good_rms: float | None = None,
     covariance: bool = True,
     quick: bool = False,
+    precision: float | None = None,
 ) -> FitResult:
     """Fit one primitive of type ``kind`` to tip and link contacts (eq. 3).
 
@@ -690,6 +692,9 @@ def fit_primitive(
         One start from the type's quick algebraic guess (for a cylinder the coarse axis scan)
         instead of the several careful starts: for the many minimal-set fits of a consensus
         search, whose hypotheses are only tested for inliers.
+    precision : float or None
+        The residual precision [m] the caller needs: the solver also stops once a step would
+        move the (weighted) residual vector by less than this.  None: to working precision.
 
     Returns
     -------
@@ -718,6 +723,8 @@ def fit_primitive(
         raise InputError(f"noise must be positive, got {noise!r}")
     if int(max_iter) < 1:
         raise InputError(f"max_iter must be >= 1, got {max_iter!r}")
+    if precision is not None and not (precision >= 0 and math.isfinite(precision)):
+        raise InputError(f"precision must be a non-negative length, got {precision!r}")
 
     labels, _ = _labels(m)
     n = data.n_contacts
@@ -792,7 +799,8 @@ def fit_primitive(
                 fits[side] = sol
                 deltas[side] = delta
 
-        sols = [_solve_fast(m, nd, th0, side, "linear", 1.0, max_iter)
+        prec = (precision or 0.0) / nd.scale
+        sols = [_solve_fast(m, nd, th0, side, "linear", 1.0, max_iter, prec)
                 for th0 in scored[: max(1, m.starts)]]
         cut = sorted((i for i, s_ in enumerate(sols)
                       if s_.status == "Maximum_Iterations_Exceeded"), key=lambda i: sols[i].cost)

@@ -438,6 +438,7 @@ class _Context:
     max_rel_std: float = math.inf
     extend: int = 12            # contacts an undetermined seed may try, one at a time
     set_iter: int = 20          # solver iterations of a minimal set's hypothesis
+    precision: float = 0.0      # residual precision [m] every proposal fit is solved to
 
 
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
@@ -453,19 +454,21 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
                  start: FitResult | None = None, free_points: FloatArray | None = None,
                  max_iter: int = 200, covariance: bool = True, quick: bool = False,
-                 cold: bool = True) -> FitResult:
+                 cold: bool = True, precision: float | None = None) -> FitResult:
     """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given, and from the type's
     own guesses when that fails unless ``cold`` is False); ``free_points`` (robot positions:
     free space) tell a closed primitive's free side; ``covariance`` False skips the covariance
     and sensitivity (a proposal that only needs the parameters); ``quick`` starts from the
-    type's quick guess only (a minimal set's hypothesis)."""
+    type's quick guess only (a minimal set's hypothesis); ``precision`` [m] the residual
+    precision the caller needs (:func:`~wholearm_tools.fit.core.fit_primitive`)."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
-                          max_iter=max_iter, covariance=covariance)
+                          max_iter=max_iter, covariance=covariance, precision=precision)
         if f or not cold:
             return f
-    return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance, quick=quick)
+    return fit_primitive(kind, data, max_iter=max_iter, covariance=covariance, quick=quick,
+                         precision=precision)
 
 
 def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
@@ -494,7 +497,7 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
         start = np.sort(near[:m.dof + 2])
         f = (plain[kind] if plain is not None and kind in plain else
              fit_readings(kind, rd, ctx.prior_best[start], free_points=ctx.free,
-                          max_iter=ctx.max_iter))
+                          max_iter=ctx.max_iter, precision=ctx.precision))
         polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
         sel = np.flatnonzero(np.isin(rd.contact, near))
         others = near[near != anchor]
@@ -519,7 +522,8 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
                     p = np.exp(rd.log_prior[rs])
                     idx.append(int(rng.choice(rs, p=p / p.sum())))
                 g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free,
-                                 max_iter=ctx.set_iter, covariance=False, quick=True)
+                                 max_iter=ctx.set_iter, covariance=False, quick=True,
+                                 precision=ctx.precision)
             found = _consensus(g, rd, sel, near, anchor, ctx.tol) if g else None
             if found is not None and found[0] > best_key:
                 best_key, best = found[0], found[1:]
@@ -531,7 +535,8 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
         members = np.sort(inl)
         reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
                             for c in members])
-        f = fit_readings(kind, rd, reading, free_points=ctx.free, max_iter=ctx.max_iter)
+        f = fit_readings(kind, rd, reading, free_points=ctx.free,
+                         max_iter=ctx.max_iter, precision=ctx.precision)
         polished = _polish(kind, rd, members, reading, f, anchor, ctx)
         if polished is None:
             continue
@@ -582,7 +587,7 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
         cand_reading = np.array([r_best if m_ == c else int(reading[members == m_][0])
                                  for m_ in cand])
         g = fit_readings(kind, rd, cand_reading, start=f, free_points=ctx.free,
-                         max_iter=ctx.max_iter, cold=False)
+                         max_iter=ctx.max_iter, cold=False, precision=ctx.precision)
         if g and _admissible(kind, g, ctx.min_radius, ctx.max_radius_ratio) \
                 and _rms_dof(g) <= 1.5 * ctx.sigma:
             members, reading, f = cand, cand_reading, g
@@ -625,7 +630,8 @@ def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
             keep = np.delete(members, int(np.argmax(worst)))
             keep_reading = choice[np.isin(members, keep)]
         members, reading = keep, keep_reading
-        g = fit_readings(kind, rd, reading, start=f, free_points=ctx.free, max_iter=ctx.max_iter)
+        g = fit_readings(kind, rd, reading, start=f, free_points=ctx.free, max_iter=ctx.max_iter,
+                         precision=ctx.precision)
         if not g:
             return None
         f = g
@@ -663,7 +669,8 @@ def _plain(ctx: _Context, anchor: int) -> dict[str, FitResult]:
         if len(near) < m.dof + 2:
             continue
         out[kind] = fit_readings(kind, ctx.readings, ctx.prior_best[near],
-                                 free_points=ctx.free, max_iter=ctx.max_iter)
+                                 free_points=ctx.free, max_iter=ctx.max_iter,
+                                 precision=ctx.precision)
     return out
 
 
@@ -773,7 +780,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
                         policy.consensus_trials, key, free, policy.proposal_iterations,
                         policy.seed_accept if known else math.inf, sigma_id(sig),
-                        policy.max_rel_std, policy.seed_extend, policy.minimal_set_iterations)
+                        policy.max_rel_std, policy.seed_extend, policy.minimal_set_iterations,
+                        policy.solve_precision * sig)
 
     def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
              origin: str) -> Hypothesis | None:
@@ -807,7 +815,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 weight[reread[0]] = 1.0
             f = fit_readings(kind, readings, best, weight, start=h.fit if warm else None,
                              free_points=free,
-                             max_iter=200 if warm else policy.proposal_iterations)
+                             max_iter=200 if warm else policy.proposal_iterations,
+                             precision=policy.solve_precision * scorer.sigma)
             fitted[key_] = make(kind, f, members, best, origin)
         return fitted[key_]
 

@@ -44,6 +44,10 @@ class FitPolicy:
         not worth finishing (refits warm-started from a selected primitive get 200).
     minimal_set_iterations : solver iterations of a consensus hypothesis (a minimal set fitted
         exactly): it only has to be close enough for the inlier test.
+    solve_precision : every fit the search makes is solved until a step would move its
+        residual vector by less than this many noise sigmas (in norm): the score would then
+        change by less than ``solve_precision**2 / 2`` nats, and the parameters lie within
+        ``solve_precision`` standard deviations (Mahalanobis) of the least-squares optimum.
     influence_limit : a selected primitive's member whose Cook's distance exceeds this is
         proposed as an outlier (the primitive refitted without it, and so on down that chain):
         1 is the classical mark of a contact that alone moves the fit out of its own 50 %
@@ -87,6 +91,7 @@ class FitPolicy:
     consensus_trials: int = 12
     proposal_iterations: int = 30
     minimal_set_iterations: int = 20
+    solve_precision: float = 0.1
     influence_limit: float = 1.0
     rounds: int = 3
     em_rounds: int = 6
@@ -109,6 +114,9 @@ class FitPolicy:
                      "minimal_set_iterations", "rounds", "em_rounds", "neighbours"):
             if int(getattr(self, name)) < 1:
                 raise InputError(f"{name} must be at least 1, got {getattr(self, name)!r}")
+        if not (math.isfinite(self.solve_precision) and self.solve_precision >= 0):
+            raise InputError(f"solve_precision must be a non-negative number, got "
+                             f"{self.solve_precision!r}")
         if not self.influence_limit > 0:
             raise InputError(f"influence_limit must be positive, got {self.influence_limit!r}")
         if self.noise is not None and not (math.isfinite(self.noise) and self.noise > 0):

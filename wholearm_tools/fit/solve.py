@@ -22,7 +22,9 @@ Damping follows the gain ratio of each step (actual over predicted decrease, Nie
 and the iteration stops when the Gauss-Newton model predicts a relative decrease below
 :data:`FTOL` (the Newton decrement: no evaluation is spent on a step that cannot help), when a
 step moves the parameters by less than :data:`XTOL`, or when the cost reaches the rounding floor
-of a zero-residual problem.
+of a zero-residual problem.  A caller that needs the residuals only to a stated precision (a
+consensus hypothesis, tested for inliers at many noise levels) also stops once the
+Gauss-Newton step would move the weighted residual vector by less than that precision.
 
 Robust losses (pseudo-Huber, Cauchy) are minimised directly: each Gauss-Newton model is built
 with the iteratively-reweighted weights ``rho'(z) / z`` and a step is accepted only when it lowers
@@ -280,13 +282,15 @@ class LMResult:
 
 
 def solve(m: Model, nd: Any, th0: np.ndarray, side: float, loss: str, delta: float,
-          max_iter: int, link_min: Any, rho: Any, irls_weight: Any) -> LMResult:
+          max_iter: int, link_min: Any, rho: Any, irls_weight: Any, precision: float = 0.0
+          ) -> LMResult:
     """Levenberg-Marquardt from ``th0`` on normalised data ``nd`` (``core._Norm``).
 
     ``link_min(m, th, side, a, b) -> (value, t, exact)`` gives the global least clearance along
     links (``exact`` when it is a closed form, which is then used at every step); ``rho`` and
     ``irls_weight`` the loss and its reweighting (passed in by :mod:`wholearm_tools.fit.core`,
-    which owns their definitions).
+    which owns their definitions).  ``precision`` (normalised units): stop once the
+    Gauss-Newton step would move the weighted residual vector by less than this (its norm).
     """
     W = np.concatenate([nd.tip_wt, nd.link_wt])
     sw = np.sqrt(W)
@@ -349,7 +353,8 @@ def solve(m: Model, nd: Any, th0: np.ndarray, side: float, loss: str, delta: flo
             lam = np.maximum(lam, 1e-14 * max(float(lam[-1]), 1e-300))
             y = V.T @ (sc * g)
             # Newton decrement: the decrease the undamped Gauss-Newton model still promises
-            stop = 0.5 * float(np.sum(y * y / lam)) <= FTOL * cost
+            # (it is half the squared norm of the step's change of the weighted residuals)
+            stop = 0.5 * float(np.sum(y * y / lam)) <= max(FTOL * cost, 0.5 * precision**2)
         if not stop:
             step_taken = False
             while mu <= _MU_MAX:
