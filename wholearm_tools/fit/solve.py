@@ -156,18 +156,20 @@ def null_space(G: np.ndarray) -> np.ndarray:
     """Orthonormal basis ``(n, n - rank)`` of the null space of ``G (k, n)``, ``k`` small.
 
     The trailing columns of the complete QR of ``G^T`` (Householder reflections of the rows one
-    by one).  Where a row depends on the previous ones (its remaining norm, the diagonal of
-    ``R``, below ``1e-12`` of the largest entry) the reflections are written out so that row
-    is skipped and the basis keeps its dimension.
+    by one).  For one constraint, and where a row depends on the previous ones (its remaining
+    norm, the diagonal of ``R``, below ``1e-12`` of the largest entry), the reflections are
+    written out: one reflection costs less than a LAPACK call, and a dependent row is skipped
+    so the basis keeps its dimension.
     """
     k, n = G.shape
     if k == 0:
         return np.eye(n)
     A = np.array(G.T, dtype=float)
     big = float(np.max(np.abs(A), initial=0.0))
-    Q, R = np.linalg.qr(A, mode="complete")
-    if np.all(np.abs(np.diagonal(R)) > 1e-12 * big):
-        return Q[:, k:]
+    if k > 1:
+        Q, R = np.linalg.qr(A, mode="complete")
+        if np.all(np.abs(np.diagonal(R)) > 1e-12 * big):
+            return Q[:, k:]
     Q = np.eye(n)
     col = 0
     for j in range(k):
