@@ -12,7 +12,7 @@ from wholearm_tools.logs.records import JointLog
 
 def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_noise=0.003,
                   differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8, fling=None,
-                  creep=None):
+                  creep=None, push=None):
     """A guarded-move impedance log: ``moves`` = list of (target (n,), {joint: block_time}).
 
     Each move drives the commanded position toward ``target`` at ``speed`` rad/s per joint; a
@@ -22,7 +22,8 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     that velocity for 30 ms (a rebound of the blocked joints, the outer ones flung on) before
     the blocked joints come to rest and the others' controllers pull them back.  ``creep``
     rad/s: the joint of the link in contact is not stopped but held back, creeping on at that
-    speed towards its command (negative: pushed back, away from it).
+    speed towards its command (negative: pushed back, away from it).  ``push`` rad/s: the
+    joint of the link in contact, at rest before, is pushed into motion at that speed.
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate
@@ -43,7 +44,8 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
         new = q + (qc - q) * (1 - np.exp(-dt / 0.02))
         new[blocked] = q[blocked]
         if creeping.any():
-            new[creeping] = q[creeping] + creep * dt * np.sign(qc - q)[creeping]
+            new[creeping] = (q[creeping] + push * dt if push is not None else
+                             q[creeping] + creep * dt * np.sign(qc - q)[creeping])
         if t < kick_until:
             new += kick * dt
         qd_true = (new - q) / dt
@@ -66,7 +68,7 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
             for j, tb in blocks.items():
                 if t - t0 >= tb and not blocked[j] and not creeping[j]:
                     blocked[: j + 1] = True  # joints 0..j stop when link j touches
-                    if creep is not None:
+                    if creep is not None or push is not None:
                         blocked[j], creeping[j] = False, True
                     if fling is not None:
                         kick = np.asarray(fling, float)
@@ -132,6 +134,18 @@ def test_a_joint_the_contact_holds_back_without_stopping_it_names_the_link():
         c = detect_contacts(log)
         assert c.link.tolist() == [2]
         assert c.qd_before[0, 2] > 0.3
+
+
+def test_a_joint_at_rest_the_contact_sets_moving_names_the_link():
+    """Shoulder and elbow move, the wrist holds still; the tip touches, the inner joints
+    stop, and the contact pushes the wrist into motion at 0.3 rad/s against its controller.
+    The wrist never comes to rest under load and had no speed to be slowed from, yet the
+    contact changed its motion: its link is the one in contact."""
+    for seed in range(3):
+        log = impedance_log([([0.6, 0.5, 0.0], {2: 0.35})], push=0.3, seed=seed)
+        c = detect_contacts(log)
+        assert c.link.tolist() == [2]
+        assert c.qd_before[0, 2] == 0.0
 
 
 def test_reaching_the_target_is_not_a_contact():

@@ -538,22 +538,24 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
     return out, se
 
 
-def _held_back_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
-                    qd_before: FloatArray, min_len: int) -> int:
-    """The link of event ``e``, or the outermost joint the contact holds back without
-    stopping it, if that lies outward.  Such a joint creeps on while the contact holds the inner
-    ones (friction in the joint or at the contact, a compliant contact): it moves, but loaded
-    beyond the free-motion model most of that time, and from the moment the event settles at
-    less than half the speed that led into the contact (the impact slowed it).  A joint that
-    runs on at its own speed and is brought to rest by its controller afterwards (its torque
-    beyond the model as the inner joints stop: its coupled inertia changed) was not slowed by
-    the contact, and the contact is inward of it."""
+def _changed_motion_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
+                    qd_before: FloatArray, v_th: FloatArray, min_len: int) -> int:
+    """The link of event ``e``, or the outermost joint whose motion the contact changes without
+    stopping it, if that lies outward.  Such a joint moves on while the contact holds the inner
+    ones (friction in the joint or at the contact, a compliant contact, a slide), loaded beyond
+    the free-motion model most of that time, and from the moment the event settles at a
+    velocity that differs from the one that led into the contact (``qd_before``) by more than
+    half of it and more than its threshold ``v_th``: held back, slowed or reversed by the
+    impact, or, at rest before, pushed into motion against its controller.  A joint that runs
+    on at its own speed and is brought to rest by its controller afterwards (its torque beyond
+    the model as the inner joints stop: its coupled inertia changed) was not moved by the
+    contact, and the contact is inward of it."""
     k, end = e.settle, e.end
     held_for = max(end - k, 1)
     loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= max(min_len, 0.5 * held_for)
-    slowed = (np.median(np.abs(qd_s[k:min(k + min_len, end)]), axis=0)
-              <= 0.5 * np.abs(qd_before))
-    return max([int(e.link), *np.flatnonzero(loaded & slowed).tolist()])
+    after = np.median(qd_s[k:min(k + min_len, end)], axis=0)
+    changed = np.abs(after - qd_before) > np.maximum(0.5 * np.abs(qd_before), v_th)
+    return max([int(e.link), *np.flatnonzero(loaded & changed).tolist()])
 
 
 def _rigid_group(link: int, travel: FloatArray, resolution: FloatArray,
@@ -633,7 +635,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                                                          > params.k_torque * fm.scale[j]),
                                        min_len) for j in range(n)], axis=1)
     # moving with a torque beyond the free-motion model, either way (driving a slide, or held
-    # back): a joint the contact loads without stopping it (:func:`_held_back_link`)
+    # back): a joint the contact loads without stopping it (:func:`_changed_motion_link`)
     loaded_moving = np.stack([ev.drop_short(~stopped[:, j] & ~free_moving[:, j], min_len)
                               for j in range(n)], axis=1)
     events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
@@ -681,7 +683,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         held[i] = (at_rest & np.all(stopped[h0:h1], axis=0) & ~np.any(loaded[h0:h1], axis=0))
         peak[i], _ = _stop_torques(resid, stopped, saturated, k_, max(e.end, k_ + 1),
                                    out_qd[i] != 0, held[i], h1, 5 * nb, fm.scale)
-        e = replace(e, link=_held_back_link(e, loaded_moving, qd_s, out_qd[i], min_len))
+        e = replace(e, link=_changed_motion_link(e, loaded_moving, qd_s, out_qd[i], v_th, min_len))
         links[i] = e.link
         if params.rigid_outer:
             if by_map:
