@@ -539,7 +539,7 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
 
 
 def _changed_motion_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
-                    qd_before: FloatArray, v_th: FloatArray, min_len: int) -> int:
+                         qd_before: FloatArray, v_th: FloatArray, min_len: int) -> int:
     """The link of event ``e``, or the outermost joint whose motion the contact changes without
     stopping it, if that lies outward.  Such a joint moves on while the contact holds the inner
     ones (friction in the joint or at the contact, a compliant contact, a slide), loaded beyond
