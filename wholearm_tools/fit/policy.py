@@ -52,7 +52,10 @@ class FitPolicy:
         proposed as an outlier (the primitive refitted without it, and so on down that chain):
         1 is the classical mark of a contact that alone moves the fit out of its own 50 %
         confidence region (``math.inf``: no such proposals).
-    rounds : seeding rounds among the contacts the selected hypotheses leave unexplained.
+    rounds : most proposal rounds (seeds among the contacts the selected hypotheses leave
+        unexplained, refits, unions, re-readings); the loop ends earlier once a round proposes
+        nothing new.  A hypothesis the last round brings into the selection gets no proposals
+        of its own.
     em_rounds : most assign -> refit -> select iterations.
     neighbours : contacts per contact in the growth graph.
 
@@ -93,7 +96,7 @@ class FitPolicy:
     minimal_set_iterations: int = 20
     solve_precision: float = 0.1
     influence_limit: float = 1.0
-    rounds: int = 3
+    rounds: int = 4
     em_rounds: int = 6
     neighbours: int = 6
     noise: float | None = None
