@@ -25,6 +25,17 @@ def _lm(kind, data, start, side):
     return res, nd
 
 
+def _noisy_problem(kind, seed):
+    """A random ``kind`` with 16 tip and 8 link contacts at 3 mm noise, normalised, and a
+    perturbed start: (model, normalised data, start, true parameters)."""
+    rng = np.random.default_rng(seed)
+    p = truth(kind, rng)
+    data = contacts(kind, p, 16, 8, 1, rng, noise=0.003)
+    m = MODELS[kind]
+    nd = core._normalise(data)
+    return m, nd, core._raw_from_params(m, perturbed(p), nd), p
+
+
 def _params(kind, th, nd):
     m = MODELS[kind]
     return core._denormalise(m, m.to_params(th), nd)
@@ -90,12 +101,7 @@ def test_lm_and_ipopt_agree_on_the_optimum(kind):
     """Noisy tip and link contacts, random primitives: both solvers from the same start reach
     the same parameters and cost."""
     for draw in range(3):
-        rng = np.random.default_rng([17, draw])
-        p = truth(kind, rng)
-        data = contacts(kind, p, 16, 8, 1, rng, noise=0.003)
-        m = MODELS[kind]
-        nd = core._normalise(data)
-        th0 = core._raw_from_params(m, perturbed(p), nd)
+        m, nd, th0, _ = _noisy_problem(kind, [17, draw])
         lm = solve(m, nd, th0, 1.0, "linear", 1.0, 200, core._link_t, core.rho_np,
                    core._irls_weight)
         ip = core._solve(m, nd, th0, 1.0, "linear", 1.0, 200)
@@ -166,12 +172,7 @@ def test_a_fit_solved_to_a_precision_stops_within_it_of_the_optimum(kind):
     at), so a score built on the residuals changes by less than that."""
     fewer = 0
     for draw in range(4):
-        rng = np.random.default_rng([23, draw])
-        p = truth(kind, rng)
-        data = contacts(kind, p, 16, 8, 1, rng, noise=0.003)
-        m = MODELS[kind]
-        nd = core._normalise(data)
-        th0 = core._raw_from_params(m, perturbed(p), nd)
+        m, nd, th0, _ = _noisy_problem(kind, [23, draw])
         args = (m, nd, th0, 1.0, "linear", 1.0, 200, core._link_t, core.rho_np,
                 core._irls_weight)
         full = solve(*args)
