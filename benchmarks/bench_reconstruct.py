@@ -212,10 +212,11 @@ def main() -> None:
             rec = reconstruct(run, B=B, workers=1)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             cov = coverage(rec)
-            both = score(rec, cov)
+            det = determined(rec)
+            both = score(rec, cov, det)
             both["cpu"] = cpu
             t1 = time.perf_counter()
-            tip = both if args.no_tip_only else score(tip_only(rec), cov)
+            tip = both if args.no_tip_only else score(tip_only(rec), cov, det)
             t_tip = time.perf_counter() - t1
             rows.append((name, seed, B, run.log.duration, len(rec.table), wall, rec.timings,
                          both, tip, t_tip, rec.messages))
