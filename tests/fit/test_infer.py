@@ -268,3 +268,44 @@ def test_influence_singles_out_the_contact_a_fit_bends_towards(seed):
     clean, bent = cooks
     assert int(np.argmax(bent)) == len(bent) - 1
     assert bent[-1] > 2.0 * max(1.0, clean.max(), np.sort(bent)[-2])
+
+
+def _seed_context(rd: Readings, sigma: float, set_iter: int, kinds: tuple[str, ...]):
+    """The context ``infer`` gives its seeds, for ``rd`` at noise ``sigma``, no free space."""
+    from wholearm_tools.fit.infer import _Context
+
+    starts = np.r_[rd.starts, len(rd)]
+    prior_best = np.array([starts[c] + int(np.argmax(rd.log_prior[starts[c]:starts[c + 1]]))
+                           for c in range(rd.n_contacts)])
+    rep = rd.points()[prior_best]
+    order = np.argsort(np.linalg.norm(rep[:, None] - rep[None], axis=2), axis=1, kind="stable")
+    policy = FitPolicy()
+    return _Context(rd, kinds, rep, prior_best, order, sigma, 30 * sigma, 0.01,
+                    policy.max_radius_ratio, policy.seed_extra, policy.consensus_trials, 0,
+                    np.zeros((0, 3)), policy.proposal_iterations, set_iter=set_iter,
+                    precision=policy.solve_precision * sigma,
+                    set_precision=policy.solve_precision * 30 * sigma)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_minimal_set_the_solver_did_not_finish_still_finds_its_consensus(seed):
+    """Minimal sets are hypotheses for an inlier test: the solver's iterate counts, converged
+    or not.  With one iteration per set, the consensus among a seed's neighbours still finds
+    the cylinder past two contacts of another surface next to the seed."""
+    from wholearm_tools.fit.infer import _seed
+
+    rng = np.random.default_rng(seed)
+    d = contacts("cylinder", {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]),
+                              "radius": 0.1}, 14, 0, -1, rng, noise=1e-4)
+    pts = d.tip_points.copy()
+    off = np.argsort(np.linalg.norm(pts - pts[0], axis=1))[[1, 3]]
+    pts[off] *= 1.1  # a centimetre outside the cylinder
+    n = len(pts)
+    rd = readings_from_contacts(np.zeros(n, int), np.full(n, 0.95), pts, np.full(n, 0.02), pts,
+                                pts, np.full(n, 0.02))
+    ctx = _seed_context(rd, 1e-4, 1, ("cylinder",))
+    near = ctx.order[0, :5 + 2 + ctx.seed_extra]
+    on = np.setdiff1d(near, off)
+    found = [(np.sort(mem), f) for _, mem, _, f in _seed(ctx, 0)]
+    assert any(np.array_equal(mem, on) and abs(float(f.params["radius"]) - 0.1) < 5e-4
+               for mem, f in found)

@@ -437,8 +437,9 @@ class _Context:
     sigma_id: float = 0.0       # kinematic error the proposals are judged determined at
     max_rel_std: float = math.inf
     extend: int = 12            # contacts an undetermined seed may try, one at a time
-    set_iter: int = 20          # solver iterations of a minimal set's hypothesis
+    set_iter: int = 10          # solver iterations of a minimal set's hypothesis
     precision: float = 0.0      # residual precision [m] every proposal fit is solved to
+    set_precision: float = 0.0  # ... and every minimal set's hypothesis (tested at ``tol``)
 
 
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
@@ -513,7 +514,9 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
             if trial > 0:
                 # a minimal set (dof + 1 contacts, the anchor among them), each by a reading
                 # drawn by its prior, fitted exactly: algebraic guesses from link contacts are
-                # too rough
+                # too rough.  The hypothesis is the solver's iterate at ``set_iter``, converged
+                # or not, solved only as precisely as the inlier test at ``tol`` needs: it is
+                # not scored, and its consensus is refitted from scratch
                 pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)),
                                                 replace=False)]
                 idx = []
@@ -523,8 +526,9 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
                     idx.append(int(rng.choice(rs, p=p / p.sum())))
                 g = fit_readings(kind, rd, np.array(idx), free_points=ctx.free,
                                  max_iter=ctx.set_iter, covariance=False, quick=True,
-                                 precision=ctx.precision)
-            found = _consensus(g, rd, sel, near, anchor, ctx.tol) if g else None
+                                 precision=ctx.set_precision)
+            usable = g is not None and (g or g.status == "Maximum_Iterations_Exceeded")
+            found = _consensus(g, rd, sel, near, anchor, ctx.tol) if usable else None
             if found is not None and found[0] > best_key:
                 best_key, best = found[0], found[1:]
             if best is not None and len(best[0]) == len(near):
@@ -775,13 +779,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return max(sig, policy.kinematic_error * (reach or extent))
 
     def context(sig: float, known: bool) -> _Context:
-        return _Context(readings, kinds, rep, prior_best, order, sig,
-                        max(30.0 * sig, 1e-3 * extent),
+        tol = max(30.0 * sig, 1e-3 * extent)
+        return _Context(readings, kinds, rep, prior_best, order, sig, tol,
                         min_radius, policy.max_radius_ratio, policy.seed_extra,
                         policy.consensus_trials, key, free, policy.proposal_iterations,
                         policy.seed_accept if known else math.inf, sigma_id(sig),
                         policy.max_rel_std, policy.seed_extend, policy.minimal_set_iterations,
-                        policy.solve_precision * sig)
+                        policy.solve_precision * sig, policy.solve_precision * tol)
 
     def make(kind: str, fit: FitResult, members: IntArray, reading: IntArray,
              origin: str) -> Hypothesis | None:

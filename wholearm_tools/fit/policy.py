@@ -43,11 +43,15 @@ class FitPolicy:
         scratch: a type that does not describe its contacts does not converge in them, and is
         not worth finishing (refits warm-started from a selected primitive get 200).
     minimal_set_iterations : solver iterations of a consensus hypothesis (a minimal set fitted
-        exactly): it only has to be close enough for the inlier test.
+        exactly).  It only has to be close enough for the inlier test: the hypothesis is the
+        solver's iterate after these iterations, converged or not, and the consensus it finds
+        is refitted from scratch.
     solve_precision : every fit the search makes is solved until a step would move its
-        residual vector by less than this many noise sigmas (in norm): the score would then
-        change by less than ``solve_precision**2 / 2`` nats, and the parameters lie within
+        residual vector by less than this fraction of the scale it is judged at (in norm).
+        For a scored proposal that scale is the noise sigma: the score would then change by
+        less than ``solve_precision**2 / 2`` nats, and the parameters lie within
         ``solve_precision`` standard deviations (Mahalanobis) of the least-squares optimum.
+        For a minimal set's hypothesis it is the consensus inlier tolerance (30 sigmas).
     influence_limit : a selected primitive's member whose Cook's distance exceeds this is
         proposed as an outlier (the primitive refitted without it, and so on down that chain):
         1 is the classical mark of a contact that alone moves the fit out of its own 50 %
@@ -93,7 +97,7 @@ class FitPolicy:
     seed_extend: int = 12
     consensus_trials: int = 12
     proposal_iterations: int = 30
-    minimal_set_iterations: int = 20
+    minimal_set_iterations: int = 10
     solve_precision: float = 0.1
     influence_limit: float = 1.0
     rounds: int = 4
