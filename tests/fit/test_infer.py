@@ -272,13 +272,9 @@ def test_influence_singles_out_the_contact_a_fit_bends_towards(seed):
 
 def _seed_context(rd: Readings, sigma: float, set_iter: int, kinds: tuple[str, ...]):
     """The context ``infer`` gives its seeds, for ``rd`` at noise ``sigma``, no free space."""
-    from wholearm_tools.fit.infer import _Context
+    from wholearm_tools.fit.infer import _Context, _neighbourhoods
 
-    starts = np.r_[rd.starts, len(rd)]
-    prior_best = np.array([starts[c] + int(np.argmax(rd.log_prior[starts[c]:starts[c + 1]]))
-                           for c in range(rd.n_contacts)])
-    rep = rd.points()[prior_best]
-    order = np.argsort(np.linalg.norm(rep[:, None] - rep[None], axis=2), axis=1, kind="stable")
+    prior_best, rep, order = _neighbourhoods(rd)
     policy = FitPolicy()
     return _Context(rd, kinds, rep, prior_best, order, sigma, 30 * sigma, 0.01,
                     policy.max_radius_ratio, policy.seed_extra, policy.consensus_trials, 0,

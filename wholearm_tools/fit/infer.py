@@ -442,6 +442,19 @@ class _Context:
     set_precision: float = 0.0  # ... and every minimal set's hypothesis (tested at ``tol``)
 
 
+def _neighbourhoods(readings: Readings) -> tuple[IntArray, FloatArray, IntArray]:
+    """Each contact's most probable reading a priori ``(M,)``, its point (the contact's
+    representative point, ``(M, d)``), and every contact's contacts by distance from it
+    ``(M, M)``, itself first."""
+    lp = readings.log_prior
+    st = readings.starts
+    prior_best = np.array([s + int(np.argmax(lp[s:e]))
+                           for s, e in zip(st, np.r_[st[1:], len(lp)], strict=True)])
+    rep = readings.points()[prior_best]
+    D = np.linalg.norm(rep[:, None, :] - rep[None, :, :], axis=2)
+    return prior_best, rep, np.argsort(D, axis=1, kind="stable")
+
+
 def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: float) -> bool:
     if not fit or fit.primitive is None:
         return False
@@ -753,14 +766,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     if m_all < min_need or extent <= 0:
         return empty
 
-    # representative point per contact: its most probable reading's point
-    lp = readings.log_prior
-    st = readings.starts
-    prior_best = np.array([s + int(np.argmax(lp[s:e]))
-                           for s, e in zip(st, np.r_[st[1:], len(lp)], strict=True)])
-    rep = readings.points()[prior_best]
-    D = np.linalg.norm(rep[:, None, :] - rep[None, :, :], axis=2)
-    order = np.argsort(D, axis=1, kind="stable")
+    prior_best, rep, order = _neighbourhoods(readings)
     adj = np.zeros((m_all, m_all), dtype=bool)
     kn = min(policy.neighbours, m_all - 1)
     adj[np.repeat(np.arange(m_all), kn), order[:, 1:kn + 1].ravel()] = True

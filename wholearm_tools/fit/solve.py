@@ -22,9 +22,10 @@ Damping follows the gain ratio of each step (actual over predicted decrease, Nie
 and the iteration stops when the Gauss-Newton model predicts a relative decrease below
 :data:`FTOL` (the Newton decrement: no evaluation is spent on a step that cannot help), when a
 step moves the parameters by less than :data:`XTOL`, or when the cost reaches the rounding floor
-of a zero-residual problem.  A caller that needs the residuals only to a stated precision (a
-consensus hypothesis, tested for inliers at many noise levels) also stops once the
-Gauss-Newton step would move the weighted residual vector by less than that precision.
+of a zero-residual problem.  A caller that needs the residuals only to a stated precision (the
+inference's proposals, to a fraction of the noise level; a consensus hypothesis, to a fraction
+of its inlier tolerance) also stops once the Gauss-Newton step would move the weighted residual
+vector by less than that precision.
 
 Robust losses (pseudo-Huber, Cauchy) are minimised directly: each Gauss-Newton model is built
 with the iteratively-reweighted weights ``rho'(z) / z`` and a step is accepted only when it lowers
