@@ -470,13 +470,14 @@ def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike
                  max_iter: int = 200, covariance: bool = True, quick: bool = False,
                  cold: bool = True, precision: float | None = None) -> FitResult:
     """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given, and from the type's
-    own guesses when that fails unless ``cold`` is False); ``free_points`` (robot positions:
+    own guesses when that fails unless ``cold`` is False; a start the solver did not finish
+    is as good a start as a converged one); ``free_points`` (robot positions:
     free space) tell a closed primitive's free side; ``covariance`` False skips the covariance
     and sensitivity (a proposal that only needs the parameters); ``quick`` starts from the
     type's quick guess only (a minimal set's hypothesis); ``precision`` [m] the residual
     precision the caller needs (:func:`~wholearm_tools.fit.core.fit_primitive`)."""
     data = readings.fit_data(idx, weight, free_points)
-    if start is not None and start.kind == kind and start:
+    if start is not None and start.kind == kind and start.params:
         f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
                           max_iter=max_iter, covariance=covariance, precision=precision)
         if f or not cold:
@@ -515,7 +516,7 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
         polished = _polish(kind, rd, start, ctx.prior_best[start], f, anchor, ctx)
         sel = np.flatnonzero(np.isin(rd.contact, near))
         others = near[near != anchor]
-        best_key, best = (-1, -np.inf), None
+        best_key, best, best_g = (-1, -np.inf), None, None
         # the polished fit of the nearest contacts is the consensus search's first hypothesis:
         # inside a surface it may hold the whole neighbourhood, and no minimal set is drawn
         g: FitResult | None = None
@@ -529,7 +530,7 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
                 # drawn by its prior, fitted exactly: algebraic guesses from link contacts are
                 # too rough.  The hypothesis is the solver's iterate at ``set_iter``, converged
                 # or not, solved only as precisely as the inlier test at ``tol`` needs: it is
-                # not scored, and its consensus is refitted from scratch
+                # not scored, and its consensus is refitted from it
                 pick = np.r_[anchor, rng.choice(others, min(m.dof, len(others)),
                                                 replace=False)]
                 idx = []
@@ -543,7 +544,7 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
             usable = g is not None and (g or g.status == "Maximum_Iterations_Exceeded")
             found = _consensus(g, rd, sel, near, anchor, ctx.tol) if usable else None
             if found is not None and found[0] > best_key:
-                best_key, best = found[0], found[1:]
+                best_key, best, best_g = found[0], found[1:], g
             if best is not None and len(best[0]) == len(near):
                 break
         if best is None or len(best[0]) < m.dof + 2:
@@ -552,7 +553,9 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
         members = np.sort(inl)
         reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
                             for c in members])
-        f = fit_readings(kind, rd, reading, free_points=ctx.free,
+        # the consensus is fitted from the hypothesis that found it (within ``tol`` of every
+        # member), from the type's own guesses only where that does not converge
+        f = fit_readings(kind, rd, reading, start=best_g, free_points=ctx.free,
                          max_iter=ctx.max_iter, precision=ctx.precision)
         polished = _polish(kind, rd, members, reading, f, anchor, ctx)
         if polished is None:

@@ -45,7 +45,7 @@ class FitPolicy:
     minimal_set_iterations : solver iterations of a consensus hypothesis (a minimal set fitted
         exactly).  It only has to be close enough for the inlier test: the hypothesis is the
         solver's iterate after these iterations, converged or not, and the consensus it finds
-        is refitted from scratch.
+        is refitted starting from it.
     solve_precision : every fit the search makes is solved until a step would move its
         residual vector by less than this fraction of the scale it is judged at (in norm).
         For a scored proposal that scale is the noise sigma: the score would then change by
