@@ -305,3 +305,25 @@ def test_a_minimal_set_the_solver_did_not_finish_still_finds_its_consensus(seed)
     found = [(np.sort(mem), f) for _, mem, _, f in _seed(ctx, 0)]
     assert any(np.array_equal(mem, on) and abs(float(f.params["radius"]) - 0.1) < 5e-4
                for mem, f in found)
+
+
+def test_a_consensus_refitted_from_its_hypothesis_takes_the_free_side_its_hints_tell():
+    """A minimal set's hypothesis may have the wrong free side (a post where the robot was
+    inside a bore): refitted from it with the side decided afresh, the consensus is the bore."""
+    from wholearm_tools.fit.infer import fit_readings
+
+    rng = np.random.default_rng(5)
+    p = fit_synth_truth("cylinder", rng)
+    data = contacts("cylinder", p, 12, 0, -1, rng)
+    rd, _ = _readings(data)
+    spheres = np.flatnonzero(rd.sphere)
+    post = fit_primitive("cylinder", rd.fit_data(spheres), free_side=1.0)
+    assert post, post.message
+    assert post.free_side == 1.0
+    kept = fit_readings("cylinder", rd, spheres, start=post, free_points=data.free_points)
+    assert kept.free_side == 1.0
+    bore = fit_readings("cylinder", rd, spheres, start=post, free_points=data.free_points,
+                        keep_side=False)
+    assert bore, bore.message
+    assert bore.free_side == -1.0
+    assert abs(float(bore.params["radius"]) - float(p["radius"])) < 1e-6

@@ -468,17 +468,21 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
                  start: FitResult | None = None, free_points: FloatArray | None = None,
                  max_iter: int = 200, covariance: bool = True, quick: bool = False,
-                 cold: bool = True, precision: float | None = None) -> FitResult:
+                 cold: bool = True, precision: float | None = None,
+                 keep_side: bool = True) -> FitResult:
     """Fit ``kind`` to readings ``idx`` (warm from ``start`` when given, and from the type's
     own guesses when that fails unless ``cold`` is False; a start the solver did not finish
     is as good a start as a converged one); ``free_points`` (robot positions:
     free space) tell a closed primitive's free side; ``covariance`` False skips the covariance
     and sensitivity (a proposal that only needs the parameters); ``quick`` starts from the
     type's quick guess only (a minimal set's hypothesis); ``precision`` [m] the residual
-    precision the caller needs (:func:`~wholearm_tools.fit.core.fit_primitive`)."""
+    precision the caller needs (:func:`~wholearm_tools.fit.core.fit_primitive`); ``keep_side``
+    False decides a closed primitive's free side afresh on these readings' free-space hints
+    (both sides fitted from ``start`` where they do not tell) instead of keeping ``start``'s."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start.params:
-        f = fit_primitive(kind, data, free_side=start.free_side, initial=dict(start.params),
+        f = fit_primitive(kind, data, free_side=start.free_side if keep_side else None,
+                          initial=dict(start.params), quick=not keep_side,
                           max_iter=max_iter, covariance=covariance, precision=precision)
         if f or not cold:
             return f
@@ -554,9 +558,10 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
         reading = np.array([int(sel[rd.contact[sel] == c][np.argmin(r[rd.contact[sel] == c])])
                             for c in members])
         # the consensus is fitted from the hypothesis that found it (within ``tol`` of every
-        # member), from the type's own guesses only where that does not converge
+        # member), from the type's own guesses only where that does not converge; its free
+        # side is decided on the consensus's hints: the minimal set's few are less telling
         f = fit_readings(kind, rd, reading, start=best_g, free_points=ctx.free,
-                         max_iter=ctx.max_iter, precision=ctx.precision)
+                         max_iter=ctx.max_iter, precision=ctx.precision, keep_side=False)
         polished = _polish(kind, rd, members, reading, f, anchor, ctx)
         if polished is None:
             continue
