@@ -481,8 +481,10 @@ def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike
     (both sides fitted from ``start`` where they do not tell) instead of keeping ``start``'s."""
     data = readings.fit_data(idx, weight, free_points)
     if start is not None and start.kind == kind and start.params:
+        # from a start the type's guesses only vote on a side left open, and the quick
+        # guess votes as well as the careful ones
         f = fit_primitive(kind, data, free_side=start.free_side if keep_side else None,
-                          initial=dict(start.params), quick=not keep_side,
+                          initial=dict(start.params), quick=True,
                           max_iter=max_iter, covariance=covariance, precision=precision)
         if f or not cold:
             return f
