@@ -112,9 +112,6 @@ def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
     out: dict[int, bool] = {}
     for i, rows in _consistent(rec, tol).items():
         s = surfaces[i]
-        if len(rows) < MODELS[s.kind].dof + 2:
-            out[i] = False
-            continue
         data, _ = fit_data_from_table(rec.table, rows=rows)
         true_fit = SimpleNamespace(kind=s.kind, params=s.params,
                                    free_side=float(s.data.get("free_side", 1)))

@@ -138,6 +138,31 @@ def test_report_gate_passes_a_well_spread_circle_and_stops_a_pinned_one():
     assert g.pivot == len(ang) - 1 or g.worst_std > FitPolicy().max_rel_std
 
 
+def test_report_gate_needs_one_contact_to_spare_so_a_wrong_reading_shows():
+    # a circle (3 parameters) touched by tips at four well-spread angles, one of them read
+    # 2 mm off (a link contact taken for a tip): on dof + 1 contacts the fit bends to it and
+    # leaves no residual that tells, so it is withheld; five contacts, one to spare, pass
+    r, w = 0.06, 0.01
+    policy = FitPolicy()
+
+    def tips_at(deg: np.ndarray, off: float) -> FitData:
+        a = np.radians(deg)
+        rad = np.full(len(a), r + w)
+        rad[0] += off
+        tips = np.c_[np.cos(a), np.sin(a)] * rad[:, None]
+        return FitData.create(tips, w, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), w, 1.0,
+                              free_points=np.array([[0.0, 0.5]]), dim=2)
+
+    four = tips_at(np.array([0.0, 60.0, 120.0, 180.0]), 2e-3)
+    bent = fit_primitive("circle", four)
+    assert abs(bent.params["radius"] - r) > 0.01 * r      # bent by more than 1 %
+    g = report_gate(bent, four, 3e-4, policy.max_rel_std)
+    assert not g
+    assert "only just determine" in g.reason
+    five = tips_at(np.array([0.0, 60.0, 120.0, 180.0, 240.0]), 0.0)
+    assert report_gate(fit_primitive("circle", five), five, 3e-4, policy.max_rel_std)
+
+
 def test_report_gate_needs_the_flat_type_told_from_a_surface_curved_at_b():
     b = 0.02  # B, the smallest expected curvature radius
     policy = FitPolicy()

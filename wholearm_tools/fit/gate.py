@@ -13,7 +13,9 @@ type).  A primitive reaches the map when
 * it still has without any one of its contacts (the influence of a single contact): every
   contact's reading is inferred (tip or side, which link), so a primitive that one contact
   alone determines rests on one inference, and that contact's residual cannot show whether it
-  is wrong;
+  is wrong.  For the same reason it needs at least ``dof + 2`` contacts: on ``dof + 1``, the
+  others less any one fit exactly, and a reading taken the wrong way bends the fit without
+  leaving a residual that tells;
 * a flat primitive (line, plane) also has its **type** determined: its contacts tell it from a
   surface curved at the smallest expected radius ``B``.  The flat model is extended by the
   second-order term of a curved surface through its support, ``1/2 u^T K u`` in the in-plane
@@ -166,9 +168,11 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
     touch = _touch_rows(fit, data)
     rows, pts, scale = touch if touch is not None else (np.zeros((0, m.dof)), None, 0.0)
     n, dof = rows.shape
-    if n <= dof or scale <= 0:
+    if n <= dof + 1 or scale <= 0:
         return GateResult(math.inf, math.inf, -1,
-                          f"{n} contacts cannot determine its {dof} parameters")
+                          f"{n} contacts cannot determine its {dof} parameters" if n <= dof
+                          else f"its {n} contacts, less any one, only just determine its {dof} "
+                          "parameters: a contact read the wrong way would not show")
     s = sigma_kin / scale
     H = rows.T @ rows
 
