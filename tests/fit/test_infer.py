@@ -10,6 +10,7 @@ from wholearm_tools.fit import (
     FitData,
     FitPolicy,
     Readings,
+    added_cost,
     infer,
     influence,
     lying_flat,
@@ -136,6 +137,25 @@ def test_report_gate_passes_a_well_spread_circle_and_stops_a_pinned_one():
                     max_rel_std=FitPolicy().max_rel_std)
     assert not g
     assert g.pivot == len(ang) - 1 or g.worst_std > FitPolicy().max_rel_std
+
+
+@pytest.mark.parametrize("off", [0.0, 3e-4, 2e-3])
+def test_added_cost_predicts_the_refit_with_one_more_contact(off):
+    # a post touched by 8 tips and 5 links, then by one more tip ``off`` metres off it: the
+    # cost predicted from the first fit (linearised, no refit) is the refit's
+    rng = np.random.default_rng(4)
+    p = {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]), "radius": 0.08}
+    base = contacts("cylinder", p, 8, 5, 1.0, rng, noise=5e-5)
+    fit = fit_primitive("cylinder", base)
+    a = np.radians(200.0)
+    extra = np.array([[np.cos(a), np.sin(a), 0.05]]) * np.r_[0.08 + 0.02 + off,
+                                                              0.08 + 0.02 + off, 1.0]
+    plus = FitData.create(np.vstack([base.tip_points, extra]), 0.02, 1.0, base.link_a,
+                          base.link_b, 0.03, 1.0, free_points=base.free_points, dim=3)
+    refit = fit_primitive("cylinder", plus, initial=dict(fit.params), free_side=1.0)
+    actual = float(np.sum(refit.residuals ** 2))
+    predicted = added_cost(fit, plus, 8)
+    assert predicted == pytest.approx(actual, rel=0.05, abs=1e-10)
 
 
 def test_report_gate_needs_one_contact_to_spare_so_a_wrong_reading_shows():

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wholearm_tools.fit.core import _link_min, _normalise, _raw_from_params
+from wholearm_tools.fit.core import _link_min, _normalise, _raw_from_params, residuals_and_touch
 from wholearm_tools.fit.data import FitData
 from wholearm_tools.fit.models import MODELS, perp_bases
 from wholearm_tools.fit.readings import IntArray, Readings
@@ -156,6 +156,29 @@ def influence(fit: FitResult, data: FitData, residual: ArrayLike) -> np.ndarray:
     if s2 <= 0:
         return np.zeros(n)
     return z * z / (p * s2) * lev / np.clip(1.0 - lev, 1e-12, None) ** 2
+
+
+def added_cost(fit: FitResult, data: FitData, new: int) -> float:
+    """The least-squares cost ``sum r^2`` [m^2] that a refit of ``fit`` is predicted to reach
+    with row ``new`` of ``data`` (tips first) added to the others, which ``fit`` was fitted
+    to: theirs plus ``r^2 / (1 + j (J^T J)^-1 j^T)``, the rise of a linear least-squares
+    minimum when one observation with residual ``r`` and Jacobian row ``j`` joins (recursive
+    least squares), linearised at ``fit`` on the type's minimal parameterisation.  Where the
+    others do not determine ``fit`` (singular ``J^T J``) a new row could be absorbed along the
+    free direction: the prediction is then their cost alone."""
+    touch = _touch_rows(fit, data)
+    r, _ = residuals_and_touch(fit.kind, fit.params, data, fit.free_side)
+    r = np.asarray(r, dtype=float)
+    others = float(np.sum(np.delete(r, new) ** 2))
+    if touch is None:
+        return others
+    rows, _, _ = touch
+    rest = np.delete(rows, new, axis=0)
+    try:
+        h = float(rows[new] @ np.linalg.solve(rest.T @ rest, rows[new]))
+    except np.linalg.LinAlgError:
+        return others
+    return others + float(r[new]) ** 2 / (1.0 + max(h, 0.0))
 
 
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
-from wholearm_tools.fit.gate import influence
+from wholearm_tools.fit.gate import added_cost, influence
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings
@@ -613,6 +613,13 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
         cand = np.sort(np.append(members, c))
         cand_reading = np.array([r_best if m_ == c else int(reading[members == m_][0])
                                  for m_ in cand])
+        # a refit the linearised prediction puts beyond three times the acceptance limit is
+        # not tried (sliding along a family of tangent primitives lowers the refit's cost
+        # below the prediction by well under that factor)
+        new = int(rd.fit_order(rd.sphere[cand_reading])[int(np.searchsorted(cand, c))])
+        cost = added_cost(f, rd.fit_data(cand_reading), new)
+        if cost > (3.0 * 1.5 * ctx.sigma) ** 2 * max(len(cand) - MODELS[kind].dof, 1):
+            continue
         g = fit_readings(kind, rd, cand_reading, start=f, free_points=ctx.free,
                          max_iter=ctx.max_iter, cold=False, precision=ctx.precision)
         if g and _admissible(kind, g, ctx.min_radius, ctx.max_radius_ratio) \
