@@ -604,6 +604,7 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
     tangent line in one plane touches a whole family of cylinders); a fresh fit to a larger
     neighbourhood falls into another member of the family or another minimum, while a refit
     from the last solution slides along the family to the member the new contact touches too."""
+    limit = 1.5 * ctx.sigma    # the dof-corrected RMS an extended fit may reach
     for c in ctx.order[anchor, len(members):len(members) + ctx.extend]:
         if c in members:
             continue
@@ -618,12 +619,12 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
         # below the prediction by well under that factor)
         new = int(rd.fit_order(rd.sphere[cand_reading])[int(np.searchsorted(cand, c))])
         cost = added_cost(f, rd.fit_data(cand_reading), new)
-        if cost > (3.0 * 1.5 * ctx.sigma) ** 2 * max(len(cand) - MODELS[kind].dof, 1):
+        if cost > (3.0 * limit) ** 2 * max(len(cand) - MODELS[kind].dof, 1):
             continue
         g = fit_readings(kind, rd, cand_reading, start=f, free_points=ctx.free,
                          max_iter=ctx.max_iter, cold=False, precision=ctx.precision)
         if g and _admissible(kind, g, ctx.min_radius, ctx.max_radius_ratio) \
-                and _rms_dof(g) <= 1.5 * ctx.sigma:
+                and _rms_dof(g) <= limit:
             members, reading, f = cand, cand_reading, g
             if f.sensitivity * ctx.sigma_id <= ctx.max_rel_std:
                 break
