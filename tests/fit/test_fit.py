@@ -8,6 +8,7 @@ from fit_synth import contacts, param_error, truth
 
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit import FitData, cost, fit_primitive, weight_from_tip_probability
+from wholearm_tools.fit.data import FreeSpace
 from wholearm_tools.geometry import primitive_type
 
 KINDS = ["line", "circle", "plane", "sphere", "cylinder", "cone", "torus"]
@@ -180,6 +181,22 @@ def test_take_selects_contacts_in_order():
     assert s.link_radius[0] == 0.2
     with pytest.raises(InputError, match="out of range"):
         d.take([5])
+
+
+def test_free_space_near_finds_exactly_the_points_within_the_radius_of_any_centre():
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(2000, 3))
+    free = FreeSpace(pts, 3)
+    centres = rng.normal(scale=0.5, size=(7, 3))
+    d = np.linalg.norm(pts[:, None, :] - centres[None], axis=2).min(axis=1)
+    assert np.array_equal(free.near(centres, 0.4), np.flatnonzero(d <= 0.4))
+    assert len(free.near(centres[:0], 0.4)) == 0
+    # the fits of one run share it: no copy of the run's free points per fit
+    data = FitData.create(centres, free_points=free)
+    assert data.free is free
+    assert data.take([0, 1]).free is free
+    with pytest.raises(InputError, match="free_points"):
+        FitData.create(np.zeros((3, 2)), free_points=free)
 
 
 @pytest.mark.parametrize("mode", list(MODES))

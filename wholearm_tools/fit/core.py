@@ -40,7 +40,7 @@ import casadi as ca
 import numpy as np
 
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.data import FitData, FreeSpace
 from wholearm_tools.fit.models import (
     CA_OPS,
     MODELS,
@@ -176,7 +176,13 @@ class _Norm:
     b: np.ndarray
     link_w: np.ndarray
     link_wt: np.ndarray
-    free: np.ndarray
+    space: FreeSpace
+
+    @functools.cached_property
+    def free(self) -> np.ndarray:
+        """Every free-space point, normalised (only a choice between two fitted sides reads
+        them all; :func:`_local_hints` reads those near the contacts)."""
+        return (self.space.points - self.mu) / self.scale
 
 
 def _normalise(data: FitData) -> _Norm | None:
@@ -196,8 +202,7 @@ def _normalise(data: FitData) -> _Norm | None:
     wm = float(W.mean())
     return _Norm(
         mu, scale, c[:nt], data.tip_radius / scale, data.tip_weight / wm, c[nt:nt + nl],
-        c[nt + nl:], data.link_radius / scale, data.link_weight / wm,
-        (data.free_points - mu) / scale,
+        c[nt + nl:], data.link_radius / scale, data.link_weight / wm, data.free,
     )
 
 
@@ -227,12 +232,14 @@ def _ends_min(v0: np.ndarray, v1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.minimum(v0, v1), t
 
 
-def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray] | None:
+def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray,
+                     values: bool = True) -> tuple[np.ndarray | None, np.ndarray] | None:
     """Exact least clearance along segments for lines, planes, circles, spheres and cylinders
     (None for the other types).  Lines and planes are linear along a segment, and the distance
     to a centre (or an axis) is convex along it: seen from outside the minimum is the
-    projection of the centre (axis) onto the segment, seen from inside it is at an end."""
+    projection of the centre (axis) onto the segment, seen from inside it is at an end.
+    ``values`` False: only ``t`` is wanted (the clearance is None where it was not needed to
+    find ``t``)."""
     def clearance(p: np.ndarray) -> np.ndarray:
         return side * signed_distance_np(m, th, p)
 
@@ -256,14 +263,15 @@ def _closed_form_min(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np
         A = np.einsum("ij,ij->i", d, d)
         B = np.einsum("ij,ij->i", q0, d)
     t = np.clip(np.where(A > 1e-300, -B / np.maximum(A, 1e-300), 0.5), 0.0, 1.0)
-    return clearance(a + t[:, None] * d), t
+    return (clearance(a + t[:, None] * d) if values else None), t
 
 
-def _link_t(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, bool]:
+def _link_t(m: Model, th: np.ndarray, side: float, a: np.ndarray, b: np.ndarray,
+            values: bool = True) -> tuple[np.ndarray | None, np.ndarray, bool]:
     """Least clearance along each link and its t: closed form where the type has one (then
-    ``True``), else the sampled and bracketed numeric minimum (``False``)."""
-    exact = _closed_form_min(m, th, side, a, b)
+    ``True``), else the sampled and bracketed numeric minimum (``False``).  ``values``
+    False: only ``t`` is wanted (see :func:`_closed_form_min`)."""
+    exact = _closed_form_min(m, th, side, a, b, values)
     if exact is not None:
         return exact[0], exact[1], True
     val, t = segment_min_numeric(lambda p: side * signed_distance_np(m, th, p), a, b)
@@ -559,7 +567,7 @@ def _decide_side(m: Model, nd: _Norm, local: np.ndarray, quick: bool = False
     Also the initial guesses made for side +1 on the way (None when none were made), for the
     fit to reuse.  ``local``: :func:`_local_hints` of ``nd``."""
     no_radius = not np.any(nd.tip_w) and not np.any(nd.link_w) and len(nd.a) == 0
-    if no_radius and len(nd.free) == 0:
+    if no_radius and len(nd.space) == 0:
         return [1.0], None  # sharp tip, no links, no hints: the side does not change the fit
     ctx = InitContext(nd.tip, nd.tip_w, nd.a, nd.b, nd.link_w, 1.0)
     init = m.quick_init if quick and m.quick_init else m.init
@@ -585,17 +593,13 @@ def _local_hints(nd: _Norm) -> np.ndarray:
     contact points: the robot right behind the contacts.  Far hints say little about a closed
     primitive's side: the infinite extension of a correct bore crosses the robot's other poses
     next to a junction."""
-    hints = np.vstack([nd.free, nd.a, nd.b])
     sup = np.vstack([nd.tip, nd.a, nd.b])
-    if len(hints) == 0 or len(sup) == 0:
-        return hints[:0]
+    if len(sup) == 0:
+        return sup
     r = _near_radius(nd.tip_w, nd.link_w, 0.25)
-    # only hints inside the support's box grown by r can be that near (most of the run's poses
-    # are not): the exact test runs on those
-    box = np.all((hints >= sup.min(axis=0) - r) & (hints <= sup.max(axis=0) + r), axis=1)
-    near = hints[box]
-    d2 = np.min(np.sum((near[:, None, :] - sup[None, :, :]) ** 2, axis=2), axis=1)
-    return near[d2 <= r * r]
+    free = nd.space.points[nd.space.near(sup * nd.scale + nd.mu, r * nd.scale)]
+    # the link axes' ends are support points themselves
+    return np.vstack([(free - nd.mu) / nd.scale, nd.a, nd.b])
 
 
 def _pick_side(m: Model, nd: _Norm, fits: dict[float, _Solve], local: np.ndarray) -> float:
@@ -821,7 +825,7 @@ def fit_primitive(
                         covariance=covariance, outliers=outliers.get(side),
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
-                        and len(nd.free) + len(nd.a) == 0)
+                        and len(nd.space) + len(nd.a) == 0)
 
 
 def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
@@ -935,7 +939,7 @@ def residuals_and_touch(kind: str, params: dict[str, Any], data: FitData, free_s
     """:func:`residuals`, and where along each link (``t`` in [0, 1], ``(Nl,)``) it touches."""
     m = MODELS[kind]
     nd = _Norm(np.zeros(m.dim), 1.0, data.tip_points, data.tip_radius, data.tip_weight,
-               data.link_a, data.link_b, data.link_radius, data.link_weight, data.free_points)
+               data.link_a, data.link_b, data.link_radius, data.link_weight, data.free)
     th = _raw_from_params(m, params, nd)
     rt, rl, t, _ = _residuals_norm(m, th, float(free_side), nd)
     return np.concatenate([rt, rl]), t

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from wholearm_tools.errors import InputError
 
@@ -69,6 +70,49 @@ def _freeze(*arrays: FloatArray) -> None:
         a.flags.writeable = False
 
 
+class FreeSpace:
+    """Points known to be in free space (the robot's positions over a run), validated once and
+    shared by every fit made on the run's contacts.  A fit asks which of them lie near its own
+    contacts (:meth:`near`); a k-d tree, built on the first such question, answers without
+    scanning them all."""
+
+    __slots__ = ("_tree", "points")
+
+    def __init__(self, points: ArrayLike | None, dim: int) -> None:
+        self.points = _points(points, dim, "free_points").copy()
+        _freeze(self.points)
+        self._tree: cKDTree | None = None
+
+    @classmethod
+    def of(cls, points: ArrayLike | FreeSpace | None, dim: int) -> FreeSpace:
+        """``points`` as a :class:`FreeSpace` (itself when it already is one)."""
+        if isinstance(points, FreeSpace):
+            if points.dim != dim:
+                raise InputError(f"expected free_points of shape (Nf, {dim}), got "
+                                 f"{points.points.shape}")
+            return points
+        return cls(points, dim)
+
+    @property
+    def dim(self) -> int:
+        return int(self.points.shape[1])
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def near(self, centres: FloatArray, radius: float) -> NDArray[np.int64]:
+        """Indices (ascending) of the points within ``radius`` of any of ``centres (k, d)``."""
+        if len(self.points) == 0 or len(centres) == 0:
+            return np.zeros(0, dtype=np.int64)
+        if self._tree is None:
+            self._tree = cKDTree(self.points)
+        hit = np.zeros(len(self.points), dtype=bool)
+        for ball in self._tree.query_ball_point(np.asarray(centres, dtype=float), radius,
+                                                return_sorted=False):
+            hit[ball] = True
+        return np.flatnonzero(hit)
+
+
 @dataclass(frozen=True, slots=True)
 class FitData:
     """Contacts to fit, columnar.  Build with :meth:`create` (scalars broadcast).
@@ -86,8 +130,9 @@ class FitData:
     link_radius : (Nl,) float
         Capsule radius ``w`` of each link contact.
     link_weight : (Nl,) float
-    free_points : (Nf, d) float
+    free : FreeSpace
         Points known to be in free space (robot positions); they fix the free side.
+        ``free_points`` is their ``(Nf, d)`` array.
 
     Contact index ``i`` runs over tips first (``0 .. Nt-1``) then links (``Nt .. Nt+Nl-1``).
     """
@@ -99,7 +144,7 @@ class FitData:
     link_b: FloatArray
     link_radius: FloatArray
     link_weight: FloatArray
-    free_points: FloatArray
+    free: FreeSpace
 
     def __post_init__(self) -> None:
         d = self.tip_points.shape[1] if self.tip_points.ndim == 2 else -1
@@ -113,11 +158,11 @@ class FitData:
         ):
             if arr.shape != shape:
                 raise InputError(f"expected {name} of shape {shape}, got {arr.shape}")
-        if self.free_points.ndim != 2 or self.free_points.shape[1] != d:
+        if self.free.dim != d:
             raise InputError(f"expected free_points of shape (Nf, {d}), got "
                              f"{self.free_points.shape}")
         _freeze(self.tip_points, self.tip_radius, self.tip_weight, self.link_a, self.link_b,
-                self.link_radius, self.link_weight, self.free_points)
+                self.link_radius, self.link_weight)
 
     @classmethod
     def create(
@@ -129,13 +174,17 @@ class FitData:
         link_b: ArrayLike | None = None,
         link_radius: ArrayLike = 0.0,
         link_weight: ArrayLike = 1.0,
-        free_points: ArrayLike | None = None,
+        free_points: ArrayLike | FreeSpace | None = None,
         dim: int | None = None,
     ) -> FitData:
         """Validate and build; radii and weights may be scalars.  ``dim`` is inferred from the
-        first non-empty point array when not given."""
+        first non-empty point array when not given.  ``free_points`` given as a
+        :class:`FreeSpace` is shared, not copied (the many fits of one run)."""
         if dim is None:
             for x in (tip_points, link_a, free_points):
+                if isinstance(x, FreeSpace):
+                    dim = x.dim
+                    break
                 if x is not None and np.size(x):
                     dim = int(np.shape(x)[-1])
                     break
@@ -146,18 +195,22 @@ class FitData:
         lb = _points(link_b, dim, "link_b")
         if la.shape != lb.shape:
             raise InputError(f"link_a {la.shape} and link_b {lb.shape} must have the same shape")
-        fp = _points(free_points, dim, "free_points")
+        fp = FreeSpace.of(free_points, dim)
         nt, nl = len(tp), len(la)
         return cls(
             tp.copy(), _column(tip_radius, nt, "tip_radius", False).copy(),
             _column(tip_weight, nt, "tip_weight", True).copy(),
             la.copy(), lb.copy(), _column(link_radius, nl, "link_radius", False).copy(),
-            _column(link_weight, nl, "link_weight", True).copy(), fp.copy(),
+            _column(link_weight, nl, "link_weight", True).copy(), fp,
         )
 
     @property
     def dim(self) -> int:
         return int(self.tip_points.shape[1])
+
+    @property
+    def free_points(self) -> FloatArray:
+        return self.free.points
 
     @property
     def n_tip(self) -> int:
@@ -185,5 +238,5 @@ class FitData:
         return FitData(
             self.tip_points[ti].copy(), self.tip_radius[ti].copy(), self.tip_weight[ti].copy(),
             self.link_a[li].copy(), self.link_b[li].copy(), self.link_radius[li].copy(),
-            self.link_weight[li].copy(), self.free_points.copy(),
+            self.link_weight[li].copy(), self.free,
         )

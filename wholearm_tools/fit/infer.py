@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
+from wholearm_tools.fit.data import FreeSpace
 from wholearm_tools.fit.gate import added_cost, influence
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.policy import FitPolicy
@@ -431,7 +432,7 @@ class _Context:
     seed_extra: int
     trials: int                 # minimal sets per seed and type
     key: int
-    free: FloatArray            # (K, d) free-space points (robot positions)
+    free: FreeSpace             # free-space points (robot positions)
     max_iter: int               # solver iterations of a seed fit
     accept: float = math.inf    # a seed fit poorer than this many sigmas is trimmed
     sigma_id: float = 0.0       # kinematic error the proposals are judged determined at
@@ -466,7 +467,7 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
-                 start: FitResult | None = None, free_points: FloatArray | None = None,
+                 start: FitResult | None = None, free_points: FreeSpace | None = None,
                  max_iter: int = 200, covariance: bool = True, quick: bool = False,
                  cold: bool = True, precision: float | None = None,
                  keep_side: bool = True) -> FitResult:
@@ -790,8 +791,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     adj[np.repeat(np.arange(m_all), kn), order[:, 1:kn + 1].ravel()] = True
     adj |= adj.T
 
-    free = (np.zeros((0, dim)) if free_points is None
-            else np.asarray(free_points, dtype=float).reshape(-1, dim))
+    # validated and indexed once, shared by every fit of the search
+    free = FreeSpace.of(None if free_points is None
+                        else np.asarray(free_points, dtype=float).reshape(-1, dim), dim)
     floor = max(float(noise_floor), 1e-6 * extent)
     sigma = float(policy.noise) if policy.noise else floor
     min_radius = policy.min_radius_over_b * B

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
-from wholearm_tools.fit.data import FitData
+from wholearm_tools.fit.data import FitData, FreeSpace
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -106,7 +106,7 @@ class Readings:
         return 0.5 * (self.a + self.b)
 
     def fit_data(self, index: ArrayLike | None = None, weight: ArrayLike | None = None,
-                 free_points: ArrayLike | None = None) -> FitData:
+                 free_points: ArrayLike | FreeSpace | None = None) -> FitData:
         """The fitter's input for readings ``index`` (all by default), sphere readings as tips
         and side readings as links, each with ``weight`` (default 1); residual ``k`` of the
         given readings is row ``fit_order(sphere[index])[k]`` of a fit on it."""

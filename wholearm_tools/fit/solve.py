@@ -289,8 +289,9 @@ def solve(m: Model, nd: Any, th0: np.ndarray, side: float, loss: str, delta: flo
           ) -> LMResult:
     """Levenberg-Marquardt from ``th0`` on normalised data ``nd`` (``core._Norm``).
 
-    ``link_min(m, th, side, a, b) -> (value, t, exact)`` gives the global least clearance along
-    links (``exact`` when it is a closed form, which is then used at every step); ``rho`` and
+    ``link_min(m, th, side, a, b, values=True) -> (value, t, exact)`` gives the global least
+    clearance along links (``exact`` when it is a closed form, which is then used at every
+    step, for ``t`` only: ``values=False``); ``rho`` and
     ``irls_weight`` the loss and its reweighting (passed in by :mod:`wholearm_tools.fit.core`,
     which owns their definitions).  ``precision`` (normalised units): stop once the
     Gauss-Newton step would move the weighted residual vector by less than this (its norm).
@@ -319,7 +320,7 @@ def solve(m: Model, nd: Any, th0: np.ndarray, side: float, loss: str, delta: flo
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         if n_link:
             if exact:
-                _, t, _ = link_min(m, th, side, nd.a, nd.b)
+                _, t, _ = link_min(m, th, side, nd.a, nd.b, False)
             else:
                 _, t = follow_links(m.kind, th, side, nd.a, nd.b, t)
             pts = np.vstack([nd.tip, nd.a + t[:, None] * ab])
