@@ -1,4 +1,5 @@
-"""Process pools that behave on Ctrl-C, and how many processes this machine gives us.
+"""Process pools that behave on Ctrl-C, how many processes this machine gives us, and linear
+algebra kept to one thread inside them.
 
 A terminal's Ctrl-C sends SIGINT to every process of the foreground group: the workers of a
 pool too.  Left alone, each worker prints its own KeyboardInterrupt traceback and the pool
@@ -30,6 +31,21 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Linear algebra (the BLAS library numpy and scipy call) on one thread within the block.
+
+    The toolkit's parallelism is its own: a pool of processes (:func:`worker_pool`), or one
+    reconstruction per worker of a Dask cluster.  BLAS threads on top of it compete for the
+    same cores, and on the small and middling products of a reconstruction they spend more CPU
+    spinning than they save in time, even with one worker.  Processes forked inside the block
+    inherit the setting."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 def _worker_init(initializer: Callable[..., Any] | None, initargs: tuple[Any, ...]) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wholearm_tools._parallel import worker_pool
+from wholearm_tools._parallel import one_blas_thread, worker_pool
 from wholearm_tools.contact_table import ContactTable
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import Run
@@ -270,7 +270,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                         f"at least {need} needed (a {kinds[0]} has {MODELS[kinds[0]].dof} "
                         "parameters and must explain more contacts than that)")
     free_points = _with_contact_hints(table, free_points)
-    with worker_pool(workers) as pool:
+    with one_blas_thread(), worker_pool(workers) as pool:
         inf = infer(rd, kinds=kinds, policy=policy, B=float(B), noise_floor=noise_floor,
                     swept=swept, base=base, free_points=free_points, reach=reach,
                     executor=pool)
@@ -457,10 +457,16 @@ def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | 
     Reconstruction; a run where nothing could be fitted still returns one (with no primitives
     and messages saying why): the CLI decides whether that is an error.
     """
+    params = ReconstructParams(B=B, **options)
+    with one_blas_thread():
+        return _reconstruct(run, params, progress)
+
+
+def _reconstruct(run: Run, params: ReconstructParams,
+                 progress: Callable[[str], None] | None) -> Reconstruction:
     from wholearm_tools.classify import tip_probability
     from wholearm_tools.contacts import detect_contacts
 
-    params = ReconstructParams(B=B, **options)
     say = progress or (lambda _: None)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
