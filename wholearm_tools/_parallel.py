@@ -40,7 +40,7 @@ def one_blas_thread() -> Iterator[None]:
     The toolkit's parallelism is its own: a pool of processes (:func:`worker_pool`), or one
     reconstruction per worker of a Dask cluster.  BLAS threads on top of it compete for the
     same cores, and on the small and middling products of a reconstruction they spend more CPU
-    spinning than they save in time, even with one worker.  Processes forked inside the block
+    busy-waiting than they save in time, even with one worker.  Processes forked inside the block
     inherit the setting."""
     from threadpoolctl import threadpool_limits
 
