@@ -222,6 +222,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.data import FreeSpace
     from wholearm_tools.fit.gate import lying_flat, report_gate
     from wholearm_tools.fit.infer import DEFAULT_KINDS, infer, reading_posterior
     from wholearm_tools.fit.models import MODELS
@@ -269,7 +270,8 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         messages.append(f"too few distinct contacts to fit a primitive: {rd.n_contacts} given, "
                         f"at least {need} needed (a {kinds[0]} has {MODELS[kinds[0]].dof} "
                         "parameters and must explain more contacts than that)")
-    free_points = _with_contact_hints(table, free_points)
+    # one FreeSpace for the search and the report's fits
+    free_points = FreeSpace.of(_with_contact_hints(table, free_points), table.dim)
     with one_blas_thread(), worker_pool(workers) as pool:
         inf = infer(rd, kinds=kinds, policy=policy, B=float(B), noise_floor=noise_floor,
                     swept=swept, base=base, free_points=free_points, reach=reach,

@@ -467,7 +467,8 @@ def _admissible(ctx_kind: str, fit: FitResult, min_radius: float, max_ratio: flo
 
 
 def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike | None = None,
-                 start: FitResult | None = None, free_points: FreeSpace | None = None,
+                 start: FitResult | None = None,
+                 free_points: ArrayLike | FreeSpace | None = None,
                  max_iter: int = 200, covariance: bool = True, quick: bool = False,
                  cold: bool = True, precision: float | None = None,
                  keep_side: bool = True) -> FitResult:
@@ -749,7 +750,7 @@ def _seed_many(ctx: _Context, anchors: Sequence[int], executor: Executor | None,
 def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
           policy: FitPolicy | None = None, B: float = 0.02, noise_floor: float = 0.0,
           swept: SweptTest | None = None, base: ArrayLike | None = None,
-          free_points: ArrayLike | None = None, reach: float | None = None,
+          free_points: ArrayLike | FreeSpace | None = None, reach: float | None = None,
           rng: int | np.random.Generator | None = 0,
           executor: Executor | None = None,
           diagnostics: dict | None = None) -> Inference:
@@ -764,7 +765,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     noise_floor : smallest noise level [m] (the encoder resolution at the contacts)
     swept : where the robot has been: ``swept(points (K, d)) -> (K,) bool`` (free space), with
         a ``resolution`` attribute (its cell size, 0 when exact); base : the robot's base point
-    free_points : (K, d) points the robot occupied (free space; a fit's free side)
+    free_points : (K, d) points the robot occupied, or a :class:`~wholearm_tools.fit.data.FreeSpace`
+        of them (free space; a fit's free side)
     reach : the robot's reach [m]: kinematic errors scale with it (the scene size without one)
     rng : seeds the proposals; the result depends on nothing else (not on ``executor``)
     executor : runs the seed proposals (e.g. a process pool)
@@ -791,9 +793,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     adj[np.repeat(np.arange(m_all), kn), order[:, 1:kn + 1].ravel()] = True
     adj |= adj.T
 
-    # validated and indexed once, shared by every fit of the search
-    free = FreeSpace.of(None if free_points is None
-                        else np.asarray(free_points, dtype=float).reshape(-1, dim), dim)
+    # validated and indexed once (unless the caller did), shared by every fit of the search
+    free = FreeSpace.of(free_points, dim)
     floor = max(float(noise_floor), 1e-6 * extent)
     sigma = float(policy.noise) if policy.noise else floor
     min_radius = policy.min_radius_over_b * B
