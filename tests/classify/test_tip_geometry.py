@@ -107,6 +107,32 @@ def test_offline_map_moves_p_tip_toward_the_truth(make):
     assert hist[0, 2] == pytest.approx(offline.p_tip[0])
 
 
+def test_a_map_that_rules_out_all_but_a_sliver_gives_no_certainty():
+    """The whole run's map sweeps every dilated-boundary point of the tip push but one on the
+    link's side (an edge the arm later passed: the curvature assumption fails there).  Eq. (2)
+    with a hard P_C would call it a certain link contact on that one point; the doubt on swept
+    points keeps P_T near the ratio over the swept boundary instead."""
+    from wholearm_tools.classify.tip import TipEvaluator, labels_from_p_tip
+
+    robot, log, idx = tip_push_run(False)
+    c = contact_at(log, idx, 1)
+    p = {}
+    for doubt in (0.0, ClassifyParams().swept_doubt):
+        ev = TipEvaluator(robot, log, c, 0.02, params=ClassifyParams(swept_doubt=doubt))
+        flux = ev.flux[0]
+        side = np.flatnonzero((flux > 0) & ~ev.tip)
+        keep = side[np.argmin(flux[side])]
+        tmin = np.zeros_like(ev.tmin)
+        tmin[0, keep] = NEVER
+        ev.tmin = tmin
+        p[doubt], ok = ev.p_tip()
+        assert ok[0]
+    assert p[0.0][0] == 0.0
+    soft = p[ClassifyParams().swept_doubt][0]
+    assert 0.2 < soft < ev.p_nomap[0]
+    assert labels_from_p_tip(np.array([soft]))[0] != "link"
+
+
 def test_swept_map_marks_the_capsules_and_first_times():
     robot = two_link(0.5, 0.3, r=0.02)
     qs = np.stack([ramp(0.0, np.pi / 2), np.zeros(200)], 1)

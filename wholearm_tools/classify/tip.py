@@ -13,16 +13,21 @@ Eq. (2), the main estimate::
   (``(n·v)+ = max(n·v, 0)``).
 * ``P_C(x)``: a surface whose curvature radius is at least ``B`` and that touches the robot at
   ``g(x)`` holds a ball of radius ``B`` centred at ``x`` on its far side.  That ball cannot
-  overlap space the robot has swept, so ``P_C(x) = 0`` when any swept cell centre lies within
-  ``B - tol`` of ``x`` (i.e. ``x`` lies in the region swept by the *dilated* robot), otherwise
-  the prior (1).  The robot's own cells at the contact pose are at distance >= ``B`` from every
-  ``x`` by construction, so the cells the contact itself swept into never count against it; what
-  decides is what lies *beyond* the contact.  ``tol`` (default a quarter cell) absorbs encoder
-  noise.
+  overlap space the robot has swept, so where any swept cell centre lies within ``B - tol`` of
+  ``x`` (``x`` lies in the region swept by the *dilated* robot) only a failure of that
+  assumption (an edge or the end of a finite surface, a surface curved more sharply than
+  ``B``) leaves a surface possible: ``P_C(x)`` is the prior (1) times ``swept_doubt``
+  (0.001, the doubt the fit's reading prior keeps on a reading eq. (2) rules out), otherwise
+  the prior.  Where the map leaves admissible boundary the doubt changes P_T by about its
+  size; where it rules out nearly all of it, P_T follows the swept boundary rather than the
+  sliver the map still allows.  The robot's own cells at the contact pose are at distance
+  >= ``B`` from every ``x`` by construction, so the cells the contact itself swept into never
+  count against it; what decides is what lies *beyond* the contact.  ``tol`` (default a
+  quarter cell) absorbs encoder noise.
 * causal: map of the samples up to the contact sample; offline: the whole run's map.
-* If the map leaves no admissible boundary (the denominator vanishes: the map says everything
-  ahead is free, an assumption violated) P_T falls back to the map-free value and
-  ``consistent`` is False.
+* If the map leaves no admissible boundary (the map says everything ahead is free, an
+  assumption violated) ``consistent`` is False, and P_T is the map-free value (every point
+  carries the same doubt).
 
 Eq. (1), reported as ``p_tip_swept``: the area (2-D) or volume (3-D) newly swept by the tip
 sphere over the last displacement (the motion of the last ``B`` before the contact, at most
@@ -73,6 +78,7 @@ class ClassifyParams:
     tip_threshold: float = 0.6
     link_threshold: float = 0.2
     prior: float = 1.0
+    swept_doubt: float = 0.001
     sigma0: float = 1e-3
     tol: float | None = None
     n_axial: int = 0
@@ -87,6 +93,8 @@ class ClassifyParams:
                              f"{self.link_threshold}, {self.tip_threshold}")
         if not 0.0 < self.prior <= 1.0:
             raise InputError(f"prior must be in (0, 1], got {self.prior}")
+        if not 0.0 <= self.swept_doubt <= 1.0:
+            raise InputError(f"swept_doubt must be in [0, 1], got {self.swept_doubt}")
         if not self.sigma0 > 0:
             raise InputError(f"sigma0 must be > 0, got {self.sigma0}")
 
@@ -446,12 +454,14 @@ class TipEvaluator:
             u = np.full(len(self.contacts), NEVER - 1, dtype=np.int64)
         else:
             u = np.broadcast_to(np.asarray(until, dtype=np.int64), (len(self.contacts),))
-        pc = np.where(self.tmin > u[:, None], self.params.prior, 0.0)
+        free = self.tmin > u[:, None]
+        pc = self.params.prior * np.where(free, 1.0, self.params.swept_doubt)
         num = (self.flux * pc * self.tip).sum(1)
         den = (self.flux * pc).sum(1)
         den0 = self.flux.sum(1)
-        ok = den > 1e-9 * np.maximum(den0, 1e-300)
-        p = np.where(ok, num / np.where(ok, den, 1.0), self.p_nomap)
+        ok = (self.flux * free).sum(1) > 1e-9 * np.maximum(den0, 1e-300)
+        live = den > 1e-9 * np.maximum(den0, 1e-300)
+        p = np.where(live, num / np.where(live, den, 1.0), self.p_nomap)
         return np.clip(p, 0.0, 1.0), ok
 
     def classification(self, causal: bool, log: JointLog) -> Classification:
@@ -468,7 +478,7 @@ class TipEvaluator:
         swept = _eq1_all(self.robot, log, c, self.B)
         meta = {"resolution": self.grid.resolution, "tol": self.tol,
                 "tip_threshold": prm.tip_threshold, "link_threshold": prm.link_threshold,
-                "sigma0": prm.sigma0,
+                "swept_doubt": prm.swept_doubt, "sigma0": prm.sigma0,
                 "torque_informed": int(np.count_nonzero(self.torque_informed))}
         return Classification(p, label, variance, self.p_nomap, swept, ok, self.B, causal, meta)
 
