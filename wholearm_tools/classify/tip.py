@@ -87,6 +87,11 @@ class ClassifyParams:
     use_torques: bool = True
     torque_angle: float = 20.0
 
+    def swept_tol(self, resolution: float) -> float:
+        """How far inside ``B`` of a boundary point a swept cell centre must lie to rule the
+        point out: ``tol``, by default a quarter of the map's cell (encoder noise)."""
+        return self.tol if self.tol is not None else 0.25 * resolution
+
     def __post_init__(self) -> None:
         if not 0.0 <= self.link_threshold <= self.tip_threshold <= 1.0:
             raise InputError("expected 0 <= link_threshold <= tip_threshold <= 1, got "
@@ -396,8 +401,7 @@ class TipEvaluator:
             raise InputError(f"grid is {self.grid.dim}-D, robot workspace {robot.dim}-D")
         self.contacts = contacts
         self.index = np.asarray(contacts.index)
-        self.tol = (self.params.tol if self.params.tol is not None
-                    else 0.25 * self.grid.resolution)
+        self.tol = self.params.swept_tol(self.grid.resolution)
         M = len(contacts)
         self.torque_informed = np.zeros(M, dtype=bool)
         if M:
@@ -413,7 +417,7 @@ class TipEvaluator:
             self.tip = np.zeros(1, bool)
             self.tmin = np.zeros((0, 1), np.int64)
         num0 = (self.flux * self.tip).sum(1)
-        den0 = self.flux.sum(1)
+        self._flux_total = den0 = self.flux.sum(1)
         with np.errstate(invalid="ignore", divide="ignore"):
             self.p_nomap = np.where(den0 > 0, num0 / np.where(den0 > 0, den0, 1), 0.5)
 
@@ -458,7 +462,7 @@ class TipEvaluator:
         pc = self.params.prior * np.where(free, 1.0, self.params.swept_doubt)
         num = (self.flux * pc * self.tip).sum(1)
         den = (self.flux * pc).sum(1)
-        den0 = self.flux.sum(1)
+        den0 = self._flux_total
         ok = (self.flux * free).sum(1) > 1e-9 * np.maximum(den0, 1e-300)
         live = den > 1e-9 * np.maximum(den0, 1e-300)
         p = np.where(live, num / np.where(live, den, 1.0), self.p_nomap)

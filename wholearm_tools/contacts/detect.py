@@ -286,8 +286,9 @@ def _choose_rigid(robot: RobotModel, q_all: FloatArray, q: FloatArray, qd: Float
     grid = swept_map(robot, q_all, B=B)
     rows = np.concatenate([np.full(hi - lo + 1, g) for g, (lo, hi) in enumerate(groups)])
     cand = np.concatenate([np.arange(lo, hi + 1) for lo, hi in groups])
-    bd = _boundary(robot, q[rows], qd[rows], cand, B, ClassifyParams())
-    tmin = grid.first_within(bd.x, B - 0.25 * grid.resolution)
+    prm = ClassifyParams()
+    bd = _boundary(robot, q[rows], qd[rows], cand, B, prm)
+    tmin = grid.first_within(bd.x, B - prm.swept_tol(grid.resolution))
     weight = bd.flux * (tmin >= grid.n_samples)
     consistent = torque_consistent(robot, q[rows], bd.x, bd.normal, qd[rows] != 0, held[rows],
                                    tau[rows], tau_tol, cand, B, np.radians(force_angle),
