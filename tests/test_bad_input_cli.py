@@ -499,11 +499,14 @@ def sigint_during_reconstruct(base: Base, folder: Path) -> Outcome:
 def sigint_at_start(base: Base, folder: Path) -> Outcome:
     """Ctrl-C 0.1 s after the start, while the interpreter or the entry point is still
     importing: the process ends with one line at most (a SIGINT that arrives before Python
-    installs its handler ends it as the signal does, silently: the shell reports 130 too)."""
-    proc = wholearm("scenarios")
+    installs its handler ends it as the signal does, silently: the shell reports 130 too).
+    The command is one that cannot finish in that time (a short simulation), so the signal
+    always finds it running, and it leaves no output behind."""
+    proc = wholearm("simulate", "lab_circle", "--duration", "5", "-o", str(folder / "x.mcap"))
     time.sleep(0.1)
     os.killpg(proc.pid, signal.SIGINT)
     out = _finish(proc)
+    assert list(folder.iterdir()) == [], list(folder.iterdir())
     if out.code == -signal.SIGINT:
         return Outcome(128 + signal.SIGINT, "(no output: ended by SIGINT itself)", out.output)
     return out
