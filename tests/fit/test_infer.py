@@ -372,3 +372,31 @@ def test_a_consensus_refitted_from_its_hypothesis_takes_the_free_side_its_hints_
     assert bore, bore.message
     assert bore.free_side == -1.0
     assert abs(float(bore.params["radius"]) - float(p["radius"])) < 1e-6
+
+
+def test_a_bore_whose_hints_point_to_the_post_inside_it_is_found_by_the_sweep():
+    """Tip spheres inside a bore are tangent to the bore and to a thinner post of the same axis.
+    Where the free-space hints favour the post (here the one robot position given lies outside
+    the wall) every proposal starts on the post's side and warm refits keep it; the sweep,
+    which holds the robot inside the bore, cuts the post, and the other side of the same
+    readings is the bore."""
+
+    class Bore:
+        resolution = 0.0
+
+        def __call__(self, x: np.ndarray) -> np.ndarray:
+            return np.hypot(x[:, 0], x[:, 1]) < 0.155
+
+    p = {"point": np.zeros(3), "axis": np.array([0.0, 0.0, 1.0]), "radius": 0.16}
+    d = contacts("cylinder", p, 30, 0, -1, np.random.default_rng(2), noise=1e-4)
+    pts = d.tip_points
+    rd = readings_from_contacts(np.zeros(len(pts), int), np.full(len(pts), 0.95), pts,
+                                np.full(len(pts), 0.02), pts, pts, np.full(len(pts), 0.02))
+    outside = np.array([[0.6, 0.0, 0.0]])
+    inf = infer(rd, kinds=("plane", "sphere", "cylinder"), B=0.02, noise_floor=1e-4,
+                free_points=outside, swept=Bore(), rng=0)
+    assert [h.kind for h in inf.selected] == ["cylinder"]
+    bore = inf.selected[0].fit
+    assert bore.free_side == -1.0
+    assert float(bore.params["radius"]) == pytest.approx(0.16, rel=0.01)
+    assert np.mean(inf.assignment >= 0) > 0.9

@@ -927,6 +927,18 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     )
 
 
+def other_side(fit: FitResult) -> FitResult:
+    """``fit`` as a start on the other side of its contacts' spheres: a line's or plane's
+    normal (the side it points to is free space) reversed, a curved primitive's free side
+    flipped (the bore around a post of the same axis, the cavity around a ball)."""
+    m = MODELS[fit.kind]
+    if m.linear:
+        key = "normal" if "normal" in fit.params else "direction"
+        return dataclasses.replace(fit, params={**fit.params,
+                                                key: -np.asarray(fit.params[key], float)})
+    return dataclasses.replace(fit, free_side=-fit.free_side)
+
+
 def residuals(kind: str, params: dict[str, Any], data: FitData, free_side: float
               ) -> np.ndarray:
     """Residuals ``clearance - w`` (tips then links, metres) of ``data`` under a primitive given

@@ -26,7 +26,8 @@ neighbourhood cut to the consensus of random minimal sets of readings), growth (
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
 unions of two selected primitives (as either's type, and for neighbours as a richer one),
 every other type on a selected one's contacts, its most influential contact (Cook's distance)
-read by each of its other readings and left out (and so on down that chain), seeds at a
+read by each of its other readings and left out (and so on down that chain), any hypothesis
+only the sweep rejects refitted on the other side of its readings' spheres, seeds at a
 selected one's unexplained neighbours (among its contacts and the unexplained ones), and new
 seeds among the contacts left unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
@@ -49,7 +50,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wholearm_tools.fit.core import fit_primitive, residuals_and_touch
+from wholearm_tools.fit.core import fit_primitive, other_side, residuals_and_touch
 from wholearm_tools.fit.data import FreeSpace
 from wholearm_tools.fit.gate import added_cost, influence
 from wholearm_tools.fit.models import MODELS
@@ -824,9 +825,11 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     fitted: dict[tuple[str, bytes, object], Hypothesis | None] = {}
 
     def refit(h: Hypothesis, members: IntArray, origin: str, kind: str | None = None,
-              cold: bool = False, reread: tuple[int, int] | None = None) -> Hypothesis | None:
+              cold: bool = False, reread: tuple[int, int] | None = None,
+              flip: bool = False) -> Hypothesis | None:
         """``h`` (or a ``kind`` fitted from scratch, or with ``cold`` ``h``'s own kind from
-        scratch) refitted on ``members``, each by its most probable reading under ``h`` with
+        scratch, or with ``flip`` from ``h`` on the other side of its readings' spheres)
+        refitted on ``members``, each by its most probable reading under ``h`` with
         its posterior as weight (``reread`` ``(k, r)``: member ``k`` by reading ``r`` instead,
         at full weight); once per reading set and start.  A fit from scratch has a seed's
         iteration budget: a type that does not describe these contacts (a cone on a post's,
@@ -839,12 +842,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             best[reread[0]] = reread[1]
         warm = kind == h.kind and not cold
         # a warm fit is a proposal of its start as much as of its readings
-        key_ = (kind, best.tobytes(), identity(h)[3] if warm else None)
+        key_ = (kind, best.tobytes(), (flip, identity(h)[3]) if warm else None)
         if key_ not in fitted:
             weight = np.maximum(scorer.posterior(h)[best], 0.05)
             if reread is not None:
                 weight[reread[0]] = 1.0
-            f = fit_readings(kind, readings, best, weight, start=h.fit if warm else None,
+            start = other_side(h.fit) if flip else h.fit
+            f = fit_readings(kind, readings, best, weight, start=start if warm else None,
                              free_points=free,
                              max_iter=200 if warm else policy.proposal_iterations,
                              precision=policy.solve_precision * scorer.sigma)
@@ -1017,6 +1021,16 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         u = refit(h, union, "union", kind=k)
                         if u is not None:
                             extra.append(grow(u))
+        # a proposal that the sweep alone rejects, on the other side of its readings' spheres:
+        # the same spheres are tangent to a surface on either side of them (a bore and the post
+        # inside it, a wall and its mirror beyond the spheres), warm fits keep the side they
+        # started on, and only the sweep tells the sides apart.  Worth it where the proposal
+        # would pay for itself but for the cut
+        for h in pool:
+            if scorer.score(h).free > 0 and len(h.members) >= h.dof + 2:
+                gain = float(np.sum(scorer.c_out - h.cost[h.members]))
+                if gain > h.dof * scorer.param_price(len(h.members)):
+                    extra.append(refit(h, h.members, "other side", flip=True))
         left = np.flatnonzero(assign < 0)
         # seeds at a selected primitive's unexplained neighbours, among its contacts and the
         # unexplained ones, as its type: a fit that settled on the wrong member of a tangent
