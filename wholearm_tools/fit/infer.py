@@ -903,7 +903,22 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     seen: set[tuple[object, ...]] = set()   # identities of the pool's hypotheses
 
+    def other_side_of(h: Hypothesis) -> Hypothesis | None:
+        """``h`` refitted on its readings from the other side of their spheres, where only
+        the sweep rejects ``h`` (it would pay for its parameters but for the cut) and the other
+        side clears some of the cut.  The same spheres are tangent to a surface on either side
+        of them (a bore and the post inside it, a wall and its mirror beyond the spheres);
+        warm fits keep the side they started on, and only the sweep tells the sides apart."""
+        if h.origin == "other side" or not h.free > 0 or len(h.members) < h.dof + 2:
+            return None
+        gain = float(np.sum(scorer.c_out - h.cost[h.members]))
+        if gain <= h.dof * scorer.param_price(len(h.members)):
+            return None
+        g = refit(h, h.members, "other side", flip=True)
+        return g if g is not None and g.free < h.free else None
+
     def add(hs: Sequence[Hypothesis | None]) -> None:
+        """New hypotheses into the pool, each with its other side (:func:`other_side_of`)."""
         for h in hs:
             if h is None:
                 continue
@@ -911,6 +926,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             if k_ not in seen:
                 seen.add(k_)
                 pool.append(h)
+                add([other_side_of(h)])
 
     # ---- the noise level from plain fits at the seed contacts, then the seeds
     anchors = _farthest(rep, policy.max_seeds, rng)
@@ -1021,16 +1037,6 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         u = refit(h, union, "union", kind=k)
                         if u is not None:
                             extra.append(grow(u))
-        # a proposal that the sweep alone rejects, on the other side of its readings' spheres:
-        # the same spheres are tangent to a surface on either side of them (a bore and the post
-        # inside it, a wall and its mirror beyond the spheres), warm fits keep the side they
-        # started on, and only the sweep tells the sides apart.  Worth it where the proposal
-        # would pay for itself but for the cut
-        for h in pool:
-            if scorer.score(h).free > 0 and len(h.members) >= h.dof + 2:
-                gain = float(np.sum(scorer.c_out - h.cost[h.members]))
-                if gain > h.dof * scorer.param_price(len(h.members)):
-                    extra.append(refit(h, h.members, "other side", flip=True))
         left = np.flatnonzero(assign < 0)
         # seeds at a selected primitive's unexplained neighbours, among its contacts and the
         # unexplained ones, as its type: a fit that settled on the wrong member of a tangent
