@@ -17,7 +17,7 @@ Eq. (2), the main estimate::
   ``x`` (``x`` lies in the region swept by the *dilated* robot) only a failure of that
   assumption (an edge or the end of a finite surface, a surface curved more sharply than
   ``B``) leaves a surface possible: ``P_C(x)`` is the prior (1) times ``swept_doubt``
-  (0.001, the doubt the fit's reading prior keeps on a reading eq. (2) rules out), otherwise
+  (0.001; the fit's reading prior keeps the same doubt, ``fit.readings.P_TIP_CLIP``), otherwise
   the prior.  Where the map leaves admissible boundary the doubt changes P_T by about its
   size; where it rules out nearly all of it, P_T follows the swept boundary rather than the
   sliver the map still allows.  The robot's own cells at the contact pose are at distance

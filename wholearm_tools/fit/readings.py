@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools._arrays import read_only
+from wholearm_tools.classify.tip import ClassifyParams
 from wholearm_tools.errors import InputError
 from wholearm_tools.fit.data import FitData, FreeSpace
 
@@ -32,8 +33,9 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: tip probabilities are kept this far from 0 and 1: eq. (2) computed from a finite swept map
-#: is never certain, and a reading with prior 0 could not be revised by any evidence
-P_TIP_CLIP = 1e-3
+#: is never certain, and a reading with prior 0 could not be revised by any evidence.  The same
+#: doubt eq. (2) keeps on the boundary the robot's sweep rules out (its default ``swept_doubt``)
+P_TIP_CLIP = ClassifyParams().swept_doubt
 
 
 @dataclass(frozen=True, slots=True, eq=False)
