@@ -400,3 +400,51 @@ def test_a_bore_whose_hints_point_to_the_post_inside_it_is_found_by_the_sweep():
     assert bore.free_side == -1.0
     assert float(bore.params["radius"]) == pytest.approx(0.16, rel=0.01)
     assert np.mean(inf.assignment >= 0) > 0.9
+
+
+def test_a_fit_on_a_neighbouring_member_of_a_tangent_family_is_captured_by_the_right_one():
+    """Link sides lying along two lines (y = -a and x = -a) touch every circle centred on
+    their bisector, radius growing along it.  A fit that stopped 0.8 mm along that family
+    from the post fits them exactly and leaves the two tips on the post's far side about
+    2 mm off: beyond growth's ``k_sigma`` sigmas, within the seeds' tolerance.  Refitted on
+    every contact within that tolerance, it is the post."""
+    from wholearm_tools.fit.infer import _captured, _residuals_of
+
+    w, r_true, sigma, tol = 0.015, 0.05, 1e-4, 3e-3
+    a = r_true + w
+    x0 = np.linspace(-0.25, -0.15, 5)             # each link's inner end: it reaches past x = 0
+    inner = np.vstack([np.c_[x0, np.full(5, -a)], np.c_[np.full(5, -a), x0]])
+    outer = inner + np.vstack([np.tile([0.5, 0.0], (5, 1)), np.tile([0.0, 0.5], (5, 1))])
+    ang = np.radians([30.0, 60.0])
+    tips = (r_true + w) * np.c_[np.cos(ang), np.sin(ang)]
+    centre = np.vstack([tips, outer])
+    rd = readings_from_contacts(np.zeros(12, int), np.r_[0.9, 0.9, np.full(10, 0.1)], centre,
+                                np.full(12, w), np.vstack([tips * 1.5, inner]), centre,
+                                np.full(12, w))
+    sides = np.flatnonzero(~rd.sphere & (rd.contact >= 2))
+    c = 0.0008
+    member = fit_primitive("circle", rd.fit_data(sides), free_side=1.0,
+                           initial={"center": np.array([c, c]), "radius": r_true + c})
+    assert member
+    assert float(member.params["radius"]) == pytest.approx(r_true + c, abs=1e-5)
+    res = _residuals_of(member, rd, np.arange(len(rd)))
+    tip_res = np.abs(res[rd.sphere & (rd.contact < 2)])
+    assert np.all(tip_res > FitPolicy().k_sigma * sigma)
+    assert np.all(tip_res < tol)
+
+    got = _captured("circle", rd, member, res, tol, None, 0.1 * sigma,
+                    members=np.arange(2, 12))
+    assert got is not None
+    contacts_, readings_, fit = got
+    assert contacts_.tolist() == list(range(12))
+    assert np.all(rd.sphere[readings_[:2]])
+    assert not np.any(rd.sphere[readings_[2:]])
+    assert float(fit.params["radius"]) == pytest.approx(r_true, abs=1e-5)
+    assert np.allclose(fit.params["center"], 0.0, atol=1e-5)
+    # tips another primitive explains (their residuals withheld) are not taken
+    withheld = np.where(rd.contact < 2, np.inf, res)
+    assert _captured("circle", rd, member, withheld, tol, None, 0.1 * sigma,
+                     members=np.arange(2, 12)) is None
+    # nothing to capture where the contacts within the tolerance are the fit's own
+    assert _captured("circle", rd, fit, _residuals_of(fit, rd, np.arange(len(rd))), tol, None,
+                     0.1 * sigma, members=np.arange(12)) is None

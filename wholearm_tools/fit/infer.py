@@ -24,6 +24,7 @@ Bajcsy 1995: fit-and-grow with model selection), scored by one negative log-like
 Proposals (:class:`Hypothesis` records) come from seeds (farthest-point sampled contacts, each
 neighbourhood cut to the consensus of random minimal sets of readings), growth (every contact
 connected to a hypothesis with a reading within ``k_sigma``), refits on the assigned readings,
+a selected one refitted with every unexplained contact within the seeds' tolerance of it,
 unions of two selected primitives (as either's type, and for neighbours as a richer one),
 every other type on a selected one's contacts, its most influential contact (Cook's distance)
 read by each of its other readings and left out (and so on down that chain), any hypothesis
@@ -677,6 +678,35 @@ def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
                                                   ctx.max_radius_ratio) else None
 
 
+def _captured(kind: str, rd: Readings, f: FitResult, residual: FloatArray, tol: float,
+              free: FreeSpace | None, precision: float, members: IntArray | None = None
+              ) -> tuple[IntArray, IntArray, FitResult] | None:
+    """``f`` refitted from itself on every contact with a reading within ``tol`` of it (the
+    seeds' inlier tolerance), each by its closest reading (``residual``: of every reading
+    under ``f``; infinite for contacts that may not join).  Returns the contacts, their
+    readings and the fit; None when fewer than ``dof + 2`` contacts are that near, when none
+    of them is new to ``members`` (``f``'s own), or when the refit fails.
+
+    Growth admits a contact within ``k_sigma`` noise sigmas of the fit it has.  A fit that
+    stopped on a neighbouring member of a tangent family (link sides of one joint's sweep
+    touch a line of post centres, radius growing along it) fits its members exactly and
+    leaves the contacts that pin the right member a few ``k_sigma`` off, where growth never
+    takes them; a refit that includes them slides along the family to the member that
+    touches them all."""
+    res = np.abs(residual)
+    near = np.full(rd.n_contacts, np.inf)
+    np.minimum.at(near, rd.contact, res)
+    cand = np.flatnonzero(near <= tol)
+    if len(cand) < MODELS[kind].dof + 2 or (members is not None
+                                            and not np.setdiff1d(cand, members).size):
+        return None
+    # each contact's closest reading: the first of its rows at its least residual
+    rows = np.flatnonzero(np.isin(rd.contact, cand) & (res == near[rd.contact]))
+    closest = rows[np.unique(rd.contact[rows], return_index=True)[1]]
+    g = fit_readings(kind, rd, closest, start=f, free_points=free, precision=precision)
+    return (cand, closest, g) if g else None
+
+
 def _sides_at_ends_invalid(r: FloatArray, t: FloatArray, n_tip: int) -> FloatArray:
     """Residuals ``r`` of fit rows (spheres first, then ``len(t)`` sides touching at fraction
     ``t`` of their length) with the sides that touch at an end set infinite (see
@@ -879,6 +909,20 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             h = g
         return h
 
+    captured: set[tuple[object, ...]] = set()   # (hypothesis, allowed contacts) captured
+
+    def capture(h: Hypothesis, allowed: IntArray) -> Hypothesis | None:
+        """``h`` refitted on every contact of ``allowed`` within the seeds' tolerance
+        (:func:`_captured`), where that adds contacts to it; once per ``h`` and ``allowed``."""
+        key_ = (*identity(h), allowed.tobytes())
+        if key_ in captured:
+            return None
+        captured.add(key_)
+        res = np.where(np.isin(readings.contact, allowed), scorer.residuals(h), np.inf)
+        got = _captured(h.kind, readings, h.fit, res, context(scorer.sigma, True).tol, free,
+                        policy.solve_precision * scorer.sigma, h.members)
+        return None if got is None else make(h.kind, got[2], got[0], got[1], "capture")
+
     pool: list[Hypothesis] = []
 
     def grow_new(hs: Sequence[Hypothesis | None]) -> list[Hypothesis]:
@@ -995,6 +1039,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
                     extra.append(refit(h, mem, "other type" if k != h.kind else "cold refit",
                                        kind=k, cold=True))
+            # the same surface on its contacts and every unexplained one within the seeds'
+            # tolerance (growth admits only those within k_sigma; contacts another selected
+            # primitive explains are that one's)
+            extra.extend(grow_new([capture(h, np.union1d(mem, np.flatnonzero(assign < 0)))]))
             # the member with the most influence on it (Cook's distance) read otherwise: by
             # each of its other readings, and as an outlier, and so on down that chain.  A fit
             # bent towards one contact's reading (a side read as the sphere, a contact on an
