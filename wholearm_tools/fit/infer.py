@@ -29,8 +29,8 @@ unions of two selected primitives (as either's type, and for neighbours as a ric
 every other type on a selected one's contacts, its most influential contact (Cook's distance)
 read by each of its other readings and left out (and so on down that chain), any hypothesis
 only the sweep rejects refitted on the other side of its readings' spheres, seeds at a
-selected one's unexplained neighbours (among its contacts and the unexplained ones), and new
-seeds among the contacts left unexplained.
+selected one's unexplained neighbours (among its contacts and the unexplained ones; as its
+type and richer ones), and new seeds among the contacts left unexplained.
 A proposer never accepts or rejects: selection minimises the score (greedy additions, then
 single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
@@ -496,6 +496,15 @@ def fit_readings(kind: str, readings: Readings, idx: IntArray, weight: ArrayLike
                          precision=precision)
 
 
+def _seeded(kinds: Sequence[str]) -> tuple[str, ...]:
+    """The types a seed fits: those of at most five parameters, unless there are none (cones
+    and tori: on a seed's few contacts they fit almost any patch, and their guesses are the
+    slowest; they are offered as refits of the contacts of selected primitives, where there
+    are enough to tell them from the simpler types)."""
+    few = tuple(k for k in kinds if MODELS[k].dof <= 5)
+    return few or tuple(kinds)
+
+
 def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
           ) -> list[tuple[str, IntArray, IntArray, FitResult]]:
     """Hypotheses at one seed contact, per type: its ``dof + 2`` nearest contacts by their most
@@ -503,17 +512,12 @@ def _seed(ctx: _Context, anchor: int, plain: dict[str, FitResult] | None = None
     nearest (RANSAC, with the first fit as its first hypothesis: near the edge of a surface the
     nearest contacts mix two, and ambiguous contacts are read both ways);
     each fitted and polished (:func:`_polish`), and extended where not determined
-    (:func:`_extend`).  Types with more than five parameters (cone,
-    torus) are not seeded: on a seed's few contacts they fit almost any patch and their guesses
-    are the slowest; they are offered as refits of the contacts of selected primitives, where
-    there are enough to tell them from the simpler types (:func:`infer`)."""
+    (:func:`_extend`); for the types :func:`_seeded` names."""
     rng = np.random.default_rng([ctx.key, anchor])
     rd = ctx.readings
     out: list[tuple[str, IntArray, IntArray, FitResult]] = []
-    for kind in ctx.kinds:
+    for kind in _seeded(ctx.kinds):
         m = MODELS[kind]
-        if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
-            continue
         near = ctx.order[anchor, :m.dof + 2 + ctx.seed_extra]
         if len(near) < m.dof + 2:
             continue
@@ -729,10 +733,8 @@ def _plain(ctx: _Context, anchor: int) -> dict[str, FitResult]:
     most probable reading: the noise estimate's sample (:func:`_noise_from_seeds`, on the
     best dof-corrected RMS of each anchor) and the start of the seed there (:func:`_seed`)."""
     out: dict[str, FitResult] = {}
-    for kind in ctx.kinds:
+    for kind in _seeded(ctx.kinds):
         m = MODELS[kind]
-        if m.dof > 5 and any(MODELS[k].dof <= 5 for k in ctx.kinds):
-            continue
         near = np.sort(ctx.order[anchor, :m.dof + 2])
         if len(near) < m.dof + 2:
             continue
@@ -1021,6 +1023,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         assign = scorer.assign(chosen)
         current = scorer.contact_costs(chosen)
         extra: list[Hypothesis | None] = []
+        payable: list[tuple[str, ...]] = []   # per selected primitive, the types that could pay
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
             # the same contacts as every other type (BIC decides), and as its own type from
@@ -1032,10 +1035,9 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             # ``bound``
             near_mem = np.union1d(mem, np.flatnonzero(adj[mem].any(axis=0)))
             bound = float(np.sum(current[near_mem] - scorer.c_in)) + h.free * scorer.c_out
-            for k in kinds:
-                richer = MODELS[k].dof - h.dof
-                if richer > 0 and bound <= richer * scorer.param_price(len(mem)):
-                    continue
+            payable.append(tuple(k for k in kinds if MODELS[k].dof <= h.dof or bound
+                                 > (MODELS[k].dof - h.dof) * scorer.param_price(len(mem))))
+            for k in payable[-1]:
                 if (k != h.kind or h.free > 0) and len(mem) >= MODELS[k].dof + 2:
                     extra.append(refit(h, mem, "other type" if k != h.kind else "cold refit",
                                        kind=k, cold=True))
@@ -1087,17 +1089,22 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                             extra.append(grow(u))
         left = np.flatnonzero(assign < 0)
         # seeds at a selected primitive's unexplained neighbours, among its contacts and the
-        # unexplained ones, as its type: a fit that settled on the wrong member of a tangent
-        # family explains most of a surface's contacts exactly and leaves the rest too far
-        # from it for growth; the consensus of minimal sets through one of those finds the
-        # member through them all
+        # unexplained ones, as its type and each richer one that could pay for its extra
+        # parameters there.  A fit that settled on the wrong member of a tangent family
+        # explains most of a surface's contacts exactly and leaves the rest too far from it
+        # for growth; the consensus of minimal sets through one of those finds the member
+        # through them all.  A simpler type can read a surface's contacts by other readings (a
+        # plane tangent to the elbow spheres that touched a post by their link sides) and leave
+        # its other contacts unexplained, too few for a seed of their own
         for i, h in enumerate(chosen):
             mem = np.flatnonzero(assign == i)
             rim = np.array([c for c in left[adj[np.ix_(left, mem)].any(axis=1)]
                             if (h.kind, int(c)) not in rim_seeded], dtype=np.int64)
             if len(rim) == 0 or len(mem) < h.dof + 1:
                 continue
-            ctx = replace(context(scorer.sigma, True), kinds=(h.kind,),
+            rim_kinds = tuple(k for k in kinds if k == h.kind or (
+                k in payable[i] and MODELS[k].dof > h.dof and k in _seeded(kinds)))
+            ctx = replace(context(scorer.sigma, True), kinds=rim_kinds,
                           order=_restricted_order(order, np.union1d(mem, left)))
             picks = [int(rim[k]) for k in _farthest(rep[rim], min(2, len(rim)), rng)]
             rim_seeded.update((h.kind, c) for c in picks)
