@@ -639,6 +639,21 @@ def _extend(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
     return members, reading, f
 
 
+def _closest_readings(rd: Readings, rows: IntArray, res: FloatArray
+                      ) -> tuple[FloatArray, IntArray]:
+    """Each contact's least residual among readings ``rows`` (``res``, absolute) and the
+    reading that has it (the first of equals in ``rows``' order): ``(M,)`` each, infinity
+    and -1 for contacts without a reading in ``rows``."""
+    contact = rd.contact[rows]
+    least = np.full(rd.n_contacts, np.inf)
+    np.minimum.at(least, contact, res)
+    at = np.flatnonzero(res == least[contact])
+    first = at[np.unique(contact[at], return_index=True)[1]]
+    reading = np.full(rd.n_contacts, -1, dtype=np.int64)
+    reading[contact[first]] = rows[first]
+    return least, reading
+
+
 def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: FitResult,
             anchor: int, ctx: _Context, rounds: int = 12
             ) -> tuple[IntArray, IntArray, FitResult] | None:
@@ -655,11 +670,8 @@ def _polish(kind: str, rd: Readings, members: IntArray, reading: IntArray, f: Fi
         if not _admissible(kind, f, ctx.min_radius, ctx.max_radius_ratio):
             return None
         rows = np.flatnonzero(np.isin(rd.contact, members))
-        res = np.abs(_residuals_of(f, rd, rows))
-        best = np.full(rd.n_contacts, np.inf)
-        np.minimum.at(best, rd.contact[rows], res)
-        choice = np.array([int(rows[rd.contact[rows] == c][np.argmin(res[rd.contact[rows] == c])])
-                           for c in members])
+        best, closest = _closest_readings(rd, rows, np.abs(_residuals_of(f, rd, rows)))
+        choice = closest[members]
         scale = max(1.4826 * float(np.median(best[members])), ctx.sigma)
         keep = members[(best[members] <= 3.5 * scale) | (members == anchor)]
         keep_reading = choice[np.isin(members, keep)]
@@ -697,18 +709,13 @@ def _captured(kind: str, rd: Readings, f: FitResult, residual: FloatArray, tol: 
     leaves the contacts that pin the right member a few ``k_sigma`` off, where growth never
     takes them; a refit that includes them slides along the family to the member that
     touches them all."""
-    res = np.abs(residual)
-    near = np.full(rd.n_contacts, np.inf)
-    np.minimum.at(near, rd.contact, res)
+    near, closest = _closest_readings(rd, np.arange(len(rd)), np.abs(residual))
     cand = np.flatnonzero(near <= tol)
     if len(cand) < MODELS[kind].dof + 2 or (members is not None
                                             and not np.setdiff1d(cand, members).size):
         return None
-    # each contact's closest reading: the first of its rows at its least residual
-    rows = np.flatnonzero(np.isin(rd.contact, cand) & (res == near[rd.contact]))
-    closest = rows[np.unique(rd.contact[rows], return_index=True)[1]]
-    g = fit_readings(kind, rd, closest, start=f, free_points=free, precision=precision)
-    return (cand, closest, g) if g else None
+    g = fit_readings(kind, rd, closest[cand], start=f, free_points=free, precision=precision)
+    return (cand, closest[cand], g) if g else None
 
 
 def _sides_at_ends_invalid(r: FloatArray, t: FloatArray, n_tip: int) -> FloatArray:
@@ -1088,6 +1095,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                         if u is not None:
                             extra.append(grow(u))
         left = np.flatnonzero(assign < 0)
+        seeded = _seeded(kinds)
         # seeds at a selected primitive's unexplained neighbours, among its contacts and the
         # unexplained ones, as its type and each richer one that could pay for its extra
         # parameters there.  A fit that settled on the wrong member of a tangent family
@@ -1103,7 +1111,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             if len(rim) == 0 or len(mem) < h.dof + 1:
                 continue
             rim_kinds = tuple(k for k in kinds if k == h.kind or (
-                k in payable[i] and MODELS[k].dof > h.dof and k in _seeded(kinds)))
+                k in payable[i] and MODELS[k].dof > h.dof and k in seeded))
             ctx = replace(context(scorer.sigma, True), kinds=rim_kinds,
                           order=_restricted_order(order, np.union1d(mem, left)))
             picks = [int(rim[k]) for k in _farthest(rep[rim], min(2, len(rim)), rng)]
