@@ -215,3 +215,78 @@ def test_single_joint_move_link_from_the_held_joints_load():
         c = detect_contacts(res.run.log, params=DetectionParams(rigid_outer=False))
         assert len(c) == res.truth.n_contacts >= 1
         assert c.link[0] == res.truth.contact_link[0] == link
+
+
+def _planar_pair(upper: float = 2.5):
+    """A two-link planar arm named like :func:`impedance_log`'s joints."""
+    from wholearm_tools.robot.model import RobotModel
+
+    return RobotModel.from_spec({
+        "joints": [
+            {"name": "j0", "origin": [0, 0, 0], "radius": 0.02, "limits": [-2.5, 2.5],
+             "velocity": 1.5, "effort": 6.0},
+            {"name": "j1", "origin": [0.35, 0, 0], "radius": 0.012, "limits": [-2.5, upper],
+             "velocity": 1.5, "effort": 6.0},
+        ],
+        "tip": {"offset": [0.30, 0, 0], "radius": 0.015},
+    }, name="pair")
+
+
+def test_a_joint_held_while_another_accelerates_carries_its_coupled_inertia_not_a_contact():
+    """The elbow holds still while the shoulder swings, at three elbow angles: its torque is
+    the coupled inertia of a mass at the tip, which changes sign and size with the pose (no
+    constant per-joint coefficient fits it).  The free-motion model learns it from the run:
+    no contact is reported, and the elbow's threshold stays near its noise instead of growing
+    with what a pose-blind model would miss."""
+    robot = _planar_pair()
+    rate, rng = 500.0, np.random.default_rng(3)
+    dt = 1.0 / rate
+
+    def min_jerk(a, b, T):
+        s = np.linspace(0.0, 1.0, round(T * rate), endpoint=False)
+        return a + (b - a) * (10 * s**3 - 15 * s**4 + 6 * s**5)
+
+    q0, q1 = [0.0], [0.0]
+    for elbow in (-2.0, 0.0, 1.0, -1.0):
+        q1 += list(min_jerk(q1[-1], elbow, 1.0)) + [elbow] * round(0.3 * rate)
+        q0 += [q0[-1]] * (len(q1) - len(q0))
+        for swing in (0.8, 0.0, -0.6, 0.0):
+            q0 += list(min_jerk(q0[-1], swing, 0.6)) + [swing] * round(0.3 * rate)
+            q1 += [q1[-1]] * (len(q0) - len(q1))
+    q = np.stack([q0, q1], axis=1)
+    qd = np.gradient(q, dt, axis=0)
+    pts = robot.joint_positions(q)                        # (N, 3, 3): joints and tip
+    acc = np.gradient(np.gradient(pts, dt, axis=0), dt, axis=0)
+    masses = np.array([0.0, 0.8, 0.5])                    # at the elbow and at the tip
+    tau = np.zeros_like(q)
+    for j in range(2):                                    # moments of m * acceleration
+        lever = pts[:, j + 1:, :2] - pts[:, j:j + 1, :2]
+        cross = lever[..., 0] * acc[:, j + 1:, 1] - lever[..., 1] * acc[:, j + 1:, 0]
+        tau[:, j] = cross @ masses[j + 1:]
+    held = np.abs(qd[:, 1]) < 1e-9
+    load = np.abs(tau[held, 1]).max()                     # the elbow's coupled load
+    assert load > 0.5
+    t = np.arange(len(q)) * dt
+    log = JointLog(("j0", "j1"), t, q + rng.normal(0, 2e-5, q.shape),
+                   qd + rng.normal(0, 0.003, q.shape), tau + rng.normal(0, 0.002, q.shape))
+    c = detect_contacts(log, robot)
+    assert len(c) == 0
+    # and the elbow stays sensitive: a contact loading it by a tenth of that is seen
+    assert c.torque_threshold[1] < 0.1 * load
+
+
+def test_a_joint_driven_against_its_own_stop_is_no_contact():
+    """The elbow's command runs past its upper limit: the joint rests on its stop while its
+    controller pushes on, a torque the stop explains.  With the limit out of the way the same
+    signals are a contact on link 1 (a joint at rest pushing against something)."""
+    log = impedance_log([([0.5, 0.2], {}), ([-0.4, -0.3], {}), ([0.3, 0.25], {}),
+                         ([-0.2, 0.1], {}), ([0.5, 0.45], {})], n=2)
+    q, qd, tau, qc = (np.array(a) for a in (log.q, log.qd, log.tau_cmd, log.q_cmd))
+    stop = 0.3
+    on = q[:, 1] >= stop
+    q[on, 1] = stop + np.random.default_rng(1).normal(0, 2e-5, on.sum())
+    qd[on, 1] = np.random.default_rng(2).normal(0, 0.003, on.sum())
+    tau[:, 1] = 20.0 * (qc[:, 1] - q[:, 1]) - 1.0 * qd[:, 1]
+    pushed = JointLog(log.joint_names, log.t, q, qd, tau, qc)
+    assert detect_contacts(pushed, _planar_pair(upper=stop)).link.tolist() == []
+    assert detect_contacts(pushed, _planar_pair(upper=2.5)).link.tolist() == [1]

@@ -620,13 +620,23 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     if use_gravity and robot is None:
         raise InputError("a free-motion model with gravity needs the robot")
     grav = ev.gravity_features(robot, q) if use_gravity and robot is not None else None
-    fm = ev.free_motion(tau, qd_s, qdd, ~stopped, grav)
+    inertia = ev.inertia_features(robot, q, qd_s, qdd, dt, width) if robot is not None else None
+    fm = ev.free_motion(tau, qd_s, qdd, ~stopped, grav, inertia=inertia)
     resid = tau - fm.predicted
     if params.torque_threshold is not None:
         tau_th = np.broadcast_to(np.asarray(params.torque_threshold, float), (n,)).copy()
     else:
         tau_th = fm.coulomb + params.k_torque * np.maximum(fm.rest_scale, fm.scale)
     loaded = np.abs(resid) > tau_th
+    if robot is not None:
+        # a joint at its mechanical stop also takes the stop's reaction, which pushes it away
+        # from the stop by an unknown amount: a residual in that sense is explained by the
+        # stop alone (tau_cmd - tau_free = -(tau_stop + tau_contact)); only one against it,
+        # the controller pushing the joint away from the stop beyond the free motion's need,
+        # proves a contact pressing it in
+        tol = params.k_velocity * ev.second_difference_scale(q)
+        loaded &= ~((q <= np.asarray(robot.lower) + tol) & (resid < 0))
+        loaded &= ~((q >= np.asarray(robot.upper) - tol) & (resid > 0))
     min_len = max(params.min_stop_samples, int(np.ceil(params.min_stop_time / dt - 1e-9)))
     release = max(1, round(params.release_time / dt))
     obstructed = np.stack([ev.drop_short(stopped[:, j] & loaded[:, j], min_len)

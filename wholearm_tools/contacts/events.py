@@ -5,14 +5,20 @@ controller needs there without a contact.  What it needs without contact is lear
 run itself, per joint, by a robust linear model over every sample (contacts are a minority of
 the samples and its outliers)::
 
-    tau_j ~ b_j + v_j qd_j + c_j sign(qd_j) [moving] + sum_k a_jk qdd_k + sum_k m_jk g_jk(q)
+    tau_j ~ b_j + v_j qd_j + c_j sign(qd_j) [moving] + sum_k a_jk qdd_k
+            + sum_k m_jk g_jk(q) + sum_k u_jk h_jk(q, qd, qdd)
 
-a bias, viscous and Coulomb joint friction, inertia (own and coupled, as constants) and,
-where the log's torques hold gravity (measured effort, or a controller's gravity compensation),
-gravity: ``g_jk(q)`` is the moment about joint ``j``'s axis of a unit downward force at joint
-``k > j`` (or the tip), so ``m_jk`` are effective masses.  At rest Coulomb friction holds any
+a bias, viscous and Coulomb joint friction, inertia as constants (the joint's own, mostly the
+drive's reflected inertia, and a constant part of the coupling), the coupled inertia of the arm
+in its pose, and, where the log's torques hold gravity (measured effort, or a controller's
+gravity compensation), gravity.  ``g_jk(q)`` is the moment about joint ``j``'s axis of a unit
+downward force at joint ``k > j`` (or the tip), ``h_jk`` the moment of the inertial force of a
+unit mass there as the other joints move it (:func:`inertia_features`), so ``m_jk`` and ``u_jk``
+are effective masses: a joint held still while the others accelerate carries their coupled
+inertia, which changes size and sign with the pose.  At rest Coulomb friction holds any
 torque up to ``|c_j|``: a joint at rest is loaded when its torque departs from the model by
-more than ``|c_j|`` and ``k_torque`` noise sigmas.
+more than ``|c_j|`` and ``k_torque`` noise sigmas.  A joint resting on its mechanical stop
+also takes the stop's reaction (:func:`wholearm_tools.contacts.detect.detect_contacts`).
 
 An **event** runs from the first obstruction until the arm is released: obstruction in any
 joint, with gaps shorter than ``release_time`` bridged (a rebound that comes back, a joint that
@@ -96,6 +102,34 @@ def gravity_features(robot: RobotModel, q: FloatArray) -> FloatArray:
     return out
 
 
+def inertia_features(robot: RobotModel, q: FloatArray, qd: FloatArray, qdd: FloatArray,
+                     dt: float, width: int) -> FloatArray:
+    """``(N, n, n)``: moment about joint ``j``'s axis of the inertial (d'Alembert) force of a
+    unit mass at joint ``k + 1`` (the tip for the last), for ``k >= j`` (zero below), less the
+    part of joint ``j``'s own acceleration (the constant ``qdd_j`` term carries the joint's own
+    inertia).  The torques the other joints' motion asks of joint ``j`` are a linear
+    combination of these, weighted by the masses each outer point carries, in any pose.  The
+    points' accelerations are differentiated from their velocities ``sum_i a_i x (p - o_i)
+    qd_i`` (``qd`` smoothed) and smoothed as the joint accelerations are, so they include the
+    centripetal and Coriolis parts.  Zero while the arm is at rest: they cannot take up a
+    contact's static load."""
+    pts, axes = robot.joint_positions_and_axes(q)
+    n = robot.dof
+    N = q.shape[0]
+    out = np.zeros((N, n, n))
+    vel = np.zeros((N, n, 3))
+    for k in range(n):
+        p = pts[:, k + 1, :]
+        vel[:, k] = np.einsum("nic,ni->nc", np.cross(axes[:, : k + 1], p[:, None]
+                                                     - pts[:, : k + 1]), qd[:, : k + 1])
+    acc = smooth(np.gradient(vel, dt, axis=0).reshape(N, -1), max(width, 3)).reshape(N, n, 3)
+    for j in range(n):
+        lever = np.cross(axes[:, j:j + 1, :], pts[:, j + 1:, :] - pts[:, j:j + 1, :])
+        own = np.einsum("nkc,nkc->nk", lever, lever) * qdd[:, j:j + 1]
+        out[:, j, j:] = np.einsum("nkc,nkc->nk", lever, acc[:, j:]) - own
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class FreeMotion:
     """The learned free-motion torque of every joint.
@@ -168,7 +202,8 @@ def _trimmed_fit(X: FloatArray, y: FloatArray, rows: BoolArray, keep: float = 0.
 
 
 def free_motion(tau: FloatArray, qd: FloatArray, qdd: FloatArray, moving: BoolArray,
-                gravity: FloatArray | None, gain: float = 0.7) -> FreeMotion:
+                gravity: FloatArray | None, gain: float = 0.7,
+                inertia: FloatArray | None = None) -> FreeMotion:
     """Fit the free-motion torque model of the module docstring, per joint, robustly
     (:func:`_trimmed_fit`) on the samples where some joint moves.
 
@@ -177,11 +212,14 @@ def free_motion(tau: FloatArray, qd: FloatArray, qdd: FloatArray, moving: BoolAr
     the motion, which the trimming removes.  The arm at rest is then predicted from the same
     bias and gravity terms.  Gravity terms enter a joint's model only where they shrink its
     residual scale below ``gain`` of the model without them (where the torques hold gravity;
-    elsewhere they would only fit what contacts do).  The torque noise at rest comes from
-    second differences over the samples where the joint is at rest: a contact torque ramps or
+    elsewhere they would only fit what contacts do).  The coupled-inertia terms ``inertia``
+    (:func:`inertia_features`) always enter: they vanish at rest, so they cannot take up a
+    contact's static load, and where the torques do not carry the arm's inertia (a kinematic
+    log) their weights come out near zero.  The torque noise at rest comes from second
+    differences over the samples where the joint is at rest: a contact torque ramps or
     saturates there, so it does not reach them.
 
-    ``tau, qd, qdd, moving : (N, n)``; ``gravity : (N, n, n)`` or None."""
+    ``tau, qd, qdd, moving : (N, n)``; ``gravity, inertia : (N, n, n)`` or None."""
     N, n = tau.shape
     arm_moves = moving.any(axis=1)
     pred = np.zeros((N, n))
@@ -194,9 +232,10 @@ def free_motion(tau: FloatArray, qd: FloatArray, qdd: FloatArray, moving: BoolAr
         base += [qdd[:, k] for k in range(n)]
         fit_rows = arm_moves if np.count_nonzero(arm_moves) > 4 * (len(base) + n) else (
             np.ones(N, dtype=bool))
+        coupled = [inertia[:, j, k] for k in range(j, n)] if inertia is not None else []
         best = None
         for grav in ([False, True] if gravity is not None else [False]):
-            cols = base + ([gravity[:, j, k] for k in range(j, n)] if grav else [])
+            cols = base + ([gravity[:, j, k] for k in range(j, n)] if grav else []) + coupled
             X = np.stack(cols, axis=1)
             keep_cols = np.std(X[fit_rows], axis=0) > 1e-12
             keep_cols[0] = True
