@@ -619,8 +619,9 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     use_gravity = robot is not None if params.gravity is None else bool(params.gravity)
     if use_gravity and robot is None:
         raise InputError("a free-motion model with gravity needs the robot")
-    grav = ev.gravity_features(robot, q) if use_gravity and robot is not None else None
-    inertia = ev.inertia_features(robot, q, qd_s, qdd, dt, width) if robot is not None else None
+    kin = robot.joint_positions_and_axes(q) if robot is not None else None
+    grav = ev.gravity_features(robot, q, kin) if use_gravity and robot is not None else None
+    inertia = ev.inertia_features(robot, q, qd_s, qdd, dt, width, kin) if kin is not None else None
     fm = ev.free_motion(tau, qd_s, qdd, ~stopped, grav, inertia=inertia)
     resid = tau - fm.predicted
     if params.torque_threshold is not None:

@@ -87,11 +87,13 @@ def velocity_noise(q: FloatArray, qd: FloatArray, dt: float, width: int) -> Floa
     return np.maximum(second_difference_scale(qd) / np.sqrt(width), floor)
 
 
-def gravity_features(robot: RobotModel, q: FloatArray) -> FloatArray:
+def gravity_features(robot: RobotModel, q: FloatArray,
+                     kinematics: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``(N, n, n)``: moment about joint ``j``'s axis of a unit downward force at joint ``k + 1``
     (the tip for the last), for ``k >= j`` (zero below): gravity torques are a linear
-    combination of these, weighted by the masses each outer point carries."""
-    pts, axes = robot.joint_positions_and_axes(q)
+    combination of these, weighted by the masses each outer point carries.  ``kinematics``:
+    ``robot.joint_positions_and_axes(q)`` when the caller has it."""
+    pts, axes = robot.joint_positions_and_axes(q) if kinematics is None else kinematics
     n = robot.dof
     down = np.array([0.0, 0.0, -1.0])
     out = np.zeros((q.shape[0], n, n))
@@ -103,7 +105,8 @@ def gravity_features(robot: RobotModel, q: FloatArray) -> FloatArray:
 
 
 def inertia_features(robot: RobotModel, q: FloatArray, qd: FloatArray, qdd: FloatArray,
-                     dt: float, width: int) -> FloatArray:
+                     dt: float, width: int,
+                     kinematics: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """``(N, n, n)``: moment about joint ``j``'s axis of the inertial (d'Alembert) force of a
     unit mass at joint ``k + 1`` (the tip for the last), for ``k >= j`` (zero below), less the
     part of joint ``j``'s own acceleration (the constant ``qdd_j`` term carries the joint's own
@@ -112,22 +115,20 @@ def inertia_features(robot: RobotModel, q: FloatArray, qd: FloatArray, qdd: Floa
     points' accelerations are differentiated from their velocities ``sum_i a_i x (p - o_i)
     qd_i`` (``qd`` smoothed) and smoothed as the joint accelerations are, so they include the
     centripetal and Coriolis parts.  Zero while the arm is at rest: they cannot take up a
-    contact's static load."""
-    pts, axes = robot.joint_positions_and_axes(q)
+    contact's static load.  ``kinematics``: ``robot.joint_positions_and_axes(q)`` when the
+    caller has it."""
+    pts, axes = robot.joint_positions_and_axes(q) if kinematics is None else kinematics
     n = robot.dof
     N = q.shape[0]
-    out = np.zeros((N, n, n))
-    vel = np.zeros((N, n, 3))
-    for k in range(n):
-        p = pts[:, k + 1, :]
-        vel[:, k] = np.einsum("nic,ni->nc", np.cross(axes[:, : k + 1], p[:, None]
-                                                     - pts[:, : k + 1]), qd[:, : k + 1])
+    # lever[:, k, i] = a_i x (p_{k+1} - o_i): point k+1's velocity per unit rate of joint i,
+    # and (dotted with a force there) that force's moment about joint i; i <= k moves it
+    lever = np.cross(axes[:, None, :n, :], pts[:, 1:, None, :] - pts[:, None, :n, :])
+    lever *= (np.arange(n)[None, :] <= np.arange(n)[:, None])[None, :, :, None]
+    vel = (lever * qd[:, None, :, None]).sum(2)                             # (N, k, 3)
     acc = smooth(np.gradient(vel, dt, axis=0).reshape(N, -1), max(width, 3)).reshape(N, n, 3)
-    for j in range(n):
-        lever = np.cross(axes[:, j:j + 1, :], pts[:, j + 1:, :] - pts[:, j:j + 1, :])
-        own = np.einsum("nkc,nkc->nk", lever, lever) * qdd[:, j:j + 1]
-        out[:, j, j:] = np.einsum("nkc,nkc->nk", lever, acc[:, j:]) - own
-    return out
+    moment = (lever * acc[:, :, None, :]).sum(-1)                           # (N, k, i)
+    own = np.square(lever).sum(-1) * qdd[:, None, :]
+    return np.swapaxes(moment - own, 1, 2)
 
 
 @dataclass(frozen=True, slots=True)
