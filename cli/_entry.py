@@ -1,7 +1,8 @@
 """The ``wholearm`` console script: runs the click group and owns how the process ends.
 
 Only the standard library is imported at module level, so a Ctrl-C pressed while the group and
-its libraries are still being imported is handled like any other: one line, exit status 130.
+its libraries are still being imported is handled like any other: one line, exit status 130,
+and no output put in place (:mod:`wholearm_tools._interrupt`).
 Exit statuses: 0 success, 1 an error in the input or the work (one ``Error:`` line), 2 a usage
 error (bad option, missing input file), 130 interrupted, 141 stdout closed early (``| head``),
 which ends the command quietly.
@@ -29,8 +30,35 @@ def _silence_stdout() -> None:
         pass
 
 
+def _interrupted() -> int:
+    with contextlib.suppress(OSError):
+        sys.stderr.write("\nInterrupted.\n")
+    return EXIT_INTERRUPTED
+
+
 def run(args: list[str] | None = None) -> int:
-    """Run ``wholearm`` with ``args`` (default: the command line); return the exit status."""
+    """Run ``wholearm`` with ``args`` (default: the command line); return the exit status.
+
+    A Ctrl-C ends the command as interrupted even where a library swallowed the
+    KeyboardInterrupt or turned it into another error (:mod:`wholearm_tools._interrupt`)."""
+    pressed = None
+    try:
+        from wholearm_tools import _interrupt
+
+        _interrupt.install()
+        pressed = _interrupt.pressed
+        status = _run(args)
+    except BaseException as exc:
+        if isinstance(exc, KeyboardInterrupt) or (pressed is not None and pressed()):
+            return _interrupted()
+        raise
+    finally:
+        if pressed is not None:
+            _interrupt.release()
+    return _interrupted() if pressed() and status != EXIT_INTERRUPTED else status
+
+
+def _run(args: list[str] | None) -> int:
     try:
         import click
 
@@ -50,9 +78,7 @@ def run(args: list[str] | None = None) -> int:
             return EXIT_BROKEN_PIPE
         return rv if isinstance(rv, int) else 0
     except KeyboardInterrupt:
-        with contextlib.suppress(OSError):
-            sys.stderr.write("\nInterrupted.\n")
-        return EXIT_INTERRUPTED
+        return _interrupted()
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_BROKEN_PIPE

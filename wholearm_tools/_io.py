@@ -25,6 +25,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
+from wholearm_tools import _interrupt
 from wholearm_tools.errors import InputError, OutputError, WholearmError
 
 #: largest text input read whole into memory (map.json, contacts.csv, URDF, scenario YAML)
@@ -95,7 +96,9 @@ def _is_write_failure(exc: BaseException) -> bool:
 
 
 def _commit(tmp: Path, target: Path, replace: bool) -> None:
-    """Rename ``tmp`` onto ``target``; without ``replace``, fail if ``target`` exists."""
+    """Rename ``tmp`` onto ``target``; without ``replace``, fail if ``target`` exists.  Nothing
+    is put in place once Ctrl-C was pressed (:mod:`wholearm_tools._interrupt`)."""
+    _interrupt.check()
     check_output_target(target)
     if replace:
         os.replace(tmp, target)

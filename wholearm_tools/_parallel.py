@@ -21,6 +21,8 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
 
+from wholearm_tools import _interrupt
+
 #: seconds to wait for a terminated worker before killing it
 _STOP_TIMEOUT = 2.0
 
@@ -166,5 +168,6 @@ def interruptible_import(name: str) -> Any:
     finally:
         signal.signal(signal.SIGINT, previous)
     if pressed:
+        _interrupt.remember()
         raise KeyboardInterrupt
     return module

@@ -53,7 +53,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from wholearm_tools import __version__
+from wholearm_tools import __version__, _interrupt
 from wholearm_tools.errors import OutputError
 
 MAP_NAME = "map.json"
@@ -318,9 +318,11 @@ class OutputSet:
     # -------------------------------------------------------------- commit
 
     def commit(self) -> None:
-        """Put the staged set in place (see the module docstring)."""
+        """Put the staged set in place (see the module docstring); never once Ctrl-C was
+        pressed."""
         if self.committed:
             return
+        _interrupt.check()
         for entry in self.stage.iterdir():      # temporaries of a writer that failed late
             if entry.name not in self.names:
                 entry.unlink() if not entry.is_dir() else shutil.rmtree(entry)
