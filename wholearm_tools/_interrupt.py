@@ -35,17 +35,22 @@ def _handler(signum: int, frame: FrameType | None) -> None:
 
 def install() -> None:
     """Make SIGINT remembered as well as raised, from now on (a no-op outside the main
-    thread, where signal handlers cannot be set)."""
+    thread, where signal handlers cannot be set, and where Ctrl-C is ignored: Python keeps an
+    inherited SIG_IGN, and so does this)."""
     global _installed, _pressed
-    if threading.current_thread() is threading.main_thread():
-        _installed, _pressed = True, False
-        signal.signal(signal.SIGINT, _handler)
+    if threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:   # nohup, a background job
+        return
+    _installed, _pressed = True, False
+    signal.signal(signal.SIGINT, _handler)
 
 
 def release() -> None:
     """Give SIGINT back its default action (the command is done: a late Ctrl-C then ends the
     process quietly, as it would any program)."""
-    if _installed and threading.current_thread() is threading.main_thread():
+    if _installed and threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is _handler:
         signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
