@@ -77,8 +77,6 @@ def _run(args: list[str] | None) -> int:
             _silence_stdout()
             return EXIT_BROKEN_PIPE
         return rv if isinstance(rv, int) else 0
-    except KeyboardInterrupt:
-        return _interrupted()
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
