@@ -120,15 +120,27 @@ def inertia_features(robot: RobotModel, q: FloatArray, qd: FloatArray, qdd: Floa
     pts, axes = robot.joint_positions_and_axes(q) if kinematics is None else kinematics
     n = robot.dof
     N = q.shape[0]
-    # lever[:, k, i] = a_i x (p_{k+1} - o_i): point k+1's velocity per unit rate of joint i,
-    # and (dotted with a force there) that force's moment about joint i; i <= k moves it
-    lever = np.cross(axes[:, None, :n, :], pts[:, 1:, None, :] - pts[:, None, :n, :])
-    lever *= (np.arange(n)[None, :] <= np.arange(n)[:, None])[None, :, :, None]
-    vel = (lever * qd[:, None, :, None]).sum(2)                             # (N, k, 3)
+    p, o = pts[:, 1:, :], pts[:, :n, :]          # point k + 1, origin of joint i
+    ao = np.cross(axes, o)
+    # point k + 1's velocity sum_{i<=k} qd_i a_i x (p - o_i), from running sums over i
+    vel = (np.cross(np.cumsum(axes * qd[:, :, None], axis=1), p)
+           - np.cumsum(ao * qd[:, :, None], axis=1))
     acc = smooth(np.gradient(vel, dt, axis=0).reshape(N, -1), max(width, 3)).reshape(N, n, 3)
-    moment = (lever * acc[:, :, None, :]).sum(-1)                           # (N, k, i)
-    own = np.square(lever).sum(-1) * qdd[:, None, :]
-    return np.swapaxes(moment - own, 1, 2)
+    # the lever a_i x (p - o_i) is never formed (an (N, n, n, 3) array): its moment
+    # (a_i x (p - o_i)) . f = a_i . (p x f) - f . (a_i x o_i), and its square norm
+    # |p - o_i|^2 - (a_i . (p - o_i))^2, are sums of 3-vector dot products per pair i <= k
+    pxf = np.cross(p, acc)
+    oo = np.square(o).sum(-1)
+    aox = (axes * o).sum(-1)
+    out = np.zeros((N, n, n))
+    for k in range(n):
+        a_i, o_i, ao_i = axes[:, :k + 1], o[:, :k + 1], ao[:, :k + 1]
+        pk, fk = p[:, k, None, :], acc[:, k, None, :]
+        moment = (a_i * pxf[:, k, None, :]).sum(-1) - (ao_i * fk).sum(-1)
+        arm2 = ((pk * pk).sum(-1) - 2.0 * (o_i * pk).sum(-1) + oo[:, :k + 1]
+                - np.square((a_i * pk).sum(-1) - aox[:, :k + 1]))
+        out[:, :k + 1, k] = moment - arm2 * qdd[:, :k + 1]
+    return out
 
 
 @dataclass(frozen=True, slots=True)
