@@ -13,6 +13,7 @@ from wholearm_tools.fit import (
     added_cost,
     infer,
     influence,
+    joining_residuals,
     lying_flat,
     readings_from_contacts,
     report_gate,
@@ -156,6 +157,37 @@ def test_added_cost_predicts_the_refit_with_one_more_contact(off):
     actual = float(np.sum(refit.residuals ** 2))
     predicted = added_cost(fit, plus, 8)
     assert predicted == pytest.approx(actual, rel=0.05, abs=1e-10)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_contact_joins_by_its_prediction_not_by_the_fit_of_the_others(seed):
+    # a post (circle r 0.06) touched by 8 tips over a 60 degree arc, with 50 um noise: the fit
+    # of the arc is uncertain around the post, so a tip at 180 degrees on the post is several
+    # noise sigmas off it, yet within them of where the refit puts it (and the refit holds
+    # every tip); a tip 1 mm off the post in the middle of the arc stays as far off
+    r, w, sigma = 0.06, 0.01, 5e-5
+    rng = np.random.default_rng(seed)
+
+    def tips(deg, off=0.0, noise=0.0):
+        a = np.radians(np.asarray(deg, dtype=float))
+        rad = r + w + off + noise * rng.standard_normal(len(a))
+        return np.c_[np.cos(a), np.sin(a)] * rad[:, None]
+
+    def data(t):
+        return FitData.create(t, w, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), w, 1.0,
+                              free_points=np.array([[0.0, 0.5]]), dim=2)
+
+    arc = tips(np.linspace(0.0, 60.0, 8), noise=sigma)
+    fit = fit_primitive("circle", data(arc))
+    joining = np.r_[np.zeros(8, dtype=bool), True]
+    around = data(np.vstack([arc, tips([180.0])]))
+    r_around = abs(residuals_and_touch("circle", fit.params, around, fit.free_side)[0][8])
+    assert r_around > 5 * sigma
+    assert joining_residuals(fit, around, joining)[0] < 1.5 * sigma
+    refit = fit_primitive("circle", around, initial=dict(fit.params), free_side=fit.free_side)
+    assert np.abs(refit.residuals).max() < 3 * sigma
+    inside = data(np.vstack([arc, tips([30.0], off=1e-3)]))
+    assert joining_residuals(fit, inside, joining)[0] > 15 * sigma
 
 
 def test_report_gate_needs_one_contact_to_spare_so_a_wrong_reading_shows():

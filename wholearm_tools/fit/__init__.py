@@ -10,12 +10,20 @@ Public API
 :func:`report_gate`       covariance under a kinematic error model -> :class:`GateResult`
 :func:`influence`         each contact's Cook's distance on a fit
 :func:`added_cost`        the cost a fit is predicted to reach with one contact more
+:func:`joining_residuals` contacts' residuals in units of their refit's prediction spread
 :class:`FitPolicy`        every parameter of the loop in one frozen record
 """
 
 from wholearm_tools.fit.core import LOSSES, cost, fit_primitive, residuals
 from wholearm_tools.fit.data import FitData, weight_from_tip_probability
-from wholearm_tools.fit.gate import GateResult, added_cost, influence, lying_flat, report_gate
+from wholearm_tools.fit.gate import (
+    GateResult,
+    added_cost,
+    influence,
+    joining_residuals,
+    lying_flat,
+    report_gate,
+)
 from wholearm_tools.fit.infer import Inference, infer
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings, readings_from_contacts
@@ -34,6 +42,7 @@ __all__ = [
     "fit_primitive",
     "infer",
     "influence",
+    "joining_residuals",
     "lying_flat",
     "readings_from_contacts",
     "report_gate",

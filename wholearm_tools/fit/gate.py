@@ -181,6 +181,28 @@ def added_cost(fit: FitResult, data: FitData, new: int) -> float:
     return others + float(r[new]) ** 2 / (1.0 + max(h, 0.0))
 
 
+def joining_residuals(fit: FitResult, data: FitData, joining: ArrayLike) -> np.ndarray:
+    """For each row of ``data`` (tips first) flagged in ``joining``: its residual [m] under
+    ``fit`` in units of the spread of that prediction, ``|r| / sqrt(1 + h)`` with ``h = j
+    (J^T J)^+ j^T`` the row's leverage over the other rows (those ``fit`` was fitted to), on
+    the type's minimal parameterisation, linearised at ``fit``.  A contact of the surface
+    has it at the noise level, however far the fit's uncertainty (up a post touched on one
+    side, around it) puts the contact from ``fit``; its square is the cost a refit with the
+    contact alone added is predicted to rise by (:func:`added_cost`).  A direction the other
+    rows leave free gives no room (the pseudo-inverse): a contact that moves the fit along it
+    is left to the refit."""
+    join = np.asarray(joining, dtype=bool)
+    r, _ = residuals_and_touch(fit.kind, fit.params, data, fit.free_side)
+    r = np.abs(np.asarray(r, dtype=float)[join])
+    touch = _touch_rows(fit, data)
+    if touch is None:
+        return r
+    rows = touch[0]
+    rest = rows[~join]
+    h = np.einsum("ij,jk,ik->i", rows[join], np.linalg.pinv(rest.T @ rest), rows[join])
+    return r / np.sqrt(1.0 + np.maximum(h, 0.0))
+
+
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
                 B: float | None = None, open_touch: ArrayLike | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test

@@ -53,7 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from wholearm_tools.fit.core import fit_primitive, other_side, residuals_and_touch
 from wholearm_tools.fit.data import FreeSpace
-from wholearm_tools.fit.gate import added_cost, influence
+from wholearm_tools.fit.gate import added_cost, influence, joining_residuals
 from wholearm_tools.fit.models import MODELS
 from wholearm_tools.fit.policy import FitPolicy
 from wholearm_tools.fit.readings import Readings
@@ -894,9 +894,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             fitted[key_] = make(kind, f, members, best, origin)
         return fitted[key_]
 
+    passed: list[Hypothesis] = []   # grown hypotheses that a predicted contact extended
+
     def grow(h: Hypothesis, rounds: int = 8) -> Hypothesis:
         """Every contact connected to ``h``'s members through contacts with a reading within
-        ``k_sigma``, refitted, until the set stops changing."""
+        ``k_sigma``, refitted, until the set stops changing; then a neighbour a refit is
+        predicted to bring within ``k_sigma`` (:func:`predicted`), where it does, and so on.
+        The hypotheses it extends this way go into the pool as well (:func:`add`)."""
         for _ in range(rounds):
             res = np.abs(scorer.residuals(h))
             best_r = np.full(m_all, np.inf)
@@ -911,12 +915,49 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 frontier = nxt
             new = np.flatnonzero(reach)
             if np.array_equal(new, h.members) or len(new) < h.dof + 2:
-                return h
-            g = refit(h, new, "growth")
+                g = predicted(h, best_r)
+                if g is not None:
+                    passed.append(h)   # a proposal too: the pool, not growth, chooses
+            else:
+                g = refit(h, new, "growth")
             if g is None:
                 return h
             h = g
         return h
+
+    def predicted(h: Hypothesis, best_r: FloatArray, tries: int = 3) -> Hypothesis | None:
+        """``h`` refitted with one neighbour of its members that is beyond ``k_sigma`` of it
+        but within ``k_sigma`` of where the refit is predicted to put it
+        (:func:`~wholearm_tools.fit.gate.joining_residuals`: a fit of contacts on one side of
+        a post is uncertain up and around it), where the refit then holds every member
+        within ``k_sigma``; the neighbours by their predicted residuals, the first ``tries``.
+        One at a time: each prediction is for that contact joining alone.  None where none
+        is predicted to join, or no refit holds it."""
+        limit = policy.k_sigma * scorer.sigma
+        cand = np.flatnonzero(adj[h.members].any(axis=0) & np.isfinite(best_r)
+                              & (best_r > limit))
+        cand = cand[~np.isin(cand, h.members)]
+        if not cand.size:
+            return None
+        rows = scorer.best_reading(h)
+        given = np.r_[rows[h.members], rows[cand]]
+        at = Readings.fit_order(readings.sphere[given])[len(h.members):]
+        joining = np.zeros(len(given), dtype=bool)
+        joining[at] = True
+        dev = np.empty(len(given))
+        dev[joining] = joining_residuals(h.fit, readings.fit_data(given), joining)
+        dev = dev[at]
+        for k in np.argsort(dev, kind="stable")[:tries]:
+            if dev[k] > limit:
+                break
+            g = refit(h, np.union1d(h.members, cand[k]), "growth")
+            if g is None:
+                continue
+            least = np.full(m_all, np.inf)
+            np.minimum.at(least, readings.contact, np.abs(scorer.residuals(g)))
+            if np.all(least[g.members] <= limit):
+                return g
+        return None
 
     captured: set[tuple[object, ...]] = set()   # (hypothesis, allowed contacts) captured
 
@@ -971,7 +1012,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         return g if g is not None and g.free < h.free else None
 
     def add(hs: Sequence[Hypothesis | None]) -> None:
-        """New hypotheses into the pool, each with its other side (:func:`other_side_of`)."""
+        """New hypotheses into the pool, each with its other side (:func:`other_side_of`),
+        and those growth passed on the way (:func:`grow`)."""
+        hs = [*hs, *passed]
+        passed.clear()
         for h in hs:
             if h is None:
                 continue
