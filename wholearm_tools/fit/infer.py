@@ -896,15 +896,19 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
 
     passed: list[Hypothesis] = []   # grown hypotheses that a predicted contact extended
 
+    def least_residual(h: Hypothesis) -> FloatArray:
+        """Each contact's least absolute residual under ``h`` over its readings, ``(M,)``."""
+        out = np.full(m_all, np.inf)
+        np.minimum.at(out, readings.contact, np.abs(scorer.residuals(h)))
+        return out
+
     def grow(h: Hypothesis, rounds: int = 8) -> Hypothesis:
         """Every contact connected to ``h``'s members through contacts with a reading within
         ``k_sigma``, refitted, until the set stops changing; then a neighbour a refit is
         predicted to bring within ``k_sigma`` (:func:`predicted`), where it does, and so on.
         The hypotheses it extends this way go into the pool as well (:func:`add`)."""
         for _ in range(rounds):
-            res = np.abs(scorer.residuals(h))
-            best_r = np.full(m_all, np.inf)
-            np.minimum.at(best_r, readings.contact, res)
+            best_r = least_residual(h)
             inl = best_r <= policy.k_sigma * scorer.sigma
             reach = np.zeros(m_all, dtype=bool)
             frontier = h.members[inl[h.members]]
@@ -953,9 +957,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             g = refit(h, np.union1d(h.members, cand[k]), "growth")
             if g is None:
                 continue
-            least = np.full(m_all, np.inf)
-            np.minimum.at(least, readings.contact, np.abs(scorer.residuals(g)))
-            if np.all(least[g.members] <= limit):
+            if np.all(least_residual(g)[g.members] <= limit):
                 return g
         return None
 
