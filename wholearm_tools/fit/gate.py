@@ -6,7 +6,9 @@ deviation ``sigma_kin`` of a contact's position, a fraction of the robot's reach
 noise, when that is larger).  Under that model the parameters of a primitive fitted to ``n``
 contacts have the Gauss-Newton covariance ``sigma_kin^2 (J^T J)^-1`` on the type's minimal
 parameterisation (lengths in units of the support's RMS spread, so one number speaks for every
-type).  A primitive reaches the map when
+type; the support is the fit's data, each tip centre and both ends of each contacting link, so a
+link contact counts over the link's length, not only at its point of touch).  A primitive
+reaches the map when
 
 * its worst-determined parameter combination has a standard deviation of at most
   ``max_rel_std`` of its support's size, and
