@@ -24,8 +24,11 @@ true surface [mm].  Times are wall seconds of ``reconstruct`` (detect / classify
 
 The last table gives the totals per scenario over the seeds (surfaces touched, with enough
 distinct contacts, found, determined by their contacts and found among those, off, extra,
-the largest size error) and the CPU seconds of ``reconstruct`` per run and per contact (one
-worker, so the figure does not depend on the machine's cores).
+the largest size error, the size errors above 1 % and of those the ones beyond the 95 %
+interval the map states for that size: a size the contacts determine only to a few percent is
+reported with that interval, one off by more than its interval is wrong) and the CPU
+seconds of ``reconstruct`` per run and per contact (one worker, so the figure does not
+depend on the machine's cores).
 
 Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0-9] [--scenarios a,b]
       [--engine physics] [--duration 120] [--no-tip-only] [--cache DIR]
@@ -138,6 +141,18 @@ def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None 
                 and (a.surface_rms is None or a.surface_rms <= OFF_RMS))
 
     off = [s for s in found if not any(close(by_id[p]) for p in s.found_by)]
+    prims = {p.id: p for p in rec.surface_map.primitives}
+
+    def ci_pct(a) -> float:
+        # the half-width of the 95 % interval the map states for the size, in % of it
+        p = prims[a.primitive_id]
+        half = p.ci95.get(a.size_name) if p.ci95 else None
+        value = float(p.params[a.size_name])
+        if half is None or not value:
+            return float("nan")
+        return 100.0 * float(np.asarray(half)) / abs(value)
+
+    sized = [a for a in good if a.size_error_pct is not None]
     c, cm = ev.classification, ev.classification_map
     return {
         "link_acc": c.link_accuracy, "cls_acc": c.class_accuracy, "amb": c.ambiguous_fraction,
@@ -153,7 +168,8 @@ def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None 
         "n_prims": len(ev.primitives),
         "extra": sum(1 for a in ev.primitives if not a.type_correct)
         + (len(good) - len({a.truth_id for a in good})),
-        "size_pct": [abs(a.size_error_pct) for a in good if a.size_error_pct is not None],
+        "size_pct": [abs(a.size_error_pct) for a in sized],
+        "size_ci_pct": [ci_pct(a) for a in sized],
         "angle": [a.axis_angle_deg for a in good if a.axis_angle_deg is not None],
         "srms_mm": [1e3 * a.surface_rms for a in good if a.surface_rms is not None],
         "coverage": {f"{surfaces[i].kind}{surfaces[i].id}": c for i, c in cov.items()},
@@ -275,18 +291,22 @@ def main() -> None:
               "measured by bench_junction.py --duration 60)")
     print(f"\n## Totals over seeds {args.seeds} ({args.engine})\n")
     print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'det':>5}"
-          f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'cpu s/run':>10}"
-          f"{'cpu s/contact':>14}")
+          f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'>1 %':>5}"
+          f"{'beyond ci':>10}{'cpu s/run':>10}{'cpu s/contact':>14}")
     for name in dict.fromkeys(r[0] for r in rows):
         rs = [r for r in rows if r[0] == name]
         b = [r[7] for r in rs]
         sizes = [x for bb in b for x in bb["size_pct"]]
+        cis = [x for bb in b for x in bb["size_ci_pct"]]
+        over = [(e, c) for e, c in zip(sizes, cis, strict=True) if e > 1.0]
         print(f"{name:<14}{len(rs):>5}{sum(x['touched'] for x in b):>8}"
               f"{sum(x['dof_cov'] for x in b):>7}{sum(x['found'] for x in b):>6}"
               f"{sum(x['determined'] for x in b):>5}"
               f"{sum(x['found_determined'] for x in b):>10}"
               f"{sum(x['off'] for x in b):>4}{sum(x['extra'] for x in b):>6}"
-              f"{max(sizes, default=0.0):>11.3f}{np.mean([x['cpu'] for x in b]):>10.1f}"
+              f"{max(sizes, default=0.0):>11.3f}{len(over):>5}"
+              f"{sum(1 for e, c in over if not e <= c):>10}"
+              f"{np.mean([x['cpu'] for x in b]):>10.1f}"
               f"{np.mean([x['cpu'] / max(r[4], 1) for x, r in zip(b, rs, strict=True)]):>14.3f}")
     notes = {m for r in rows for m in r[10]}
     if notes:
