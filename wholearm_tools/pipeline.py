@@ -285,22 +285,11 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     used_as_tip = table.used_as_tip.copy()
     primitives: list[MappedPrimitive] = []
     fits: list[Any] = []
-    # per selected primitive, the readings it explains at the noise level (within k_sigma
-    # sigmas): a contact another one explains by the same reading, the same point of the
-    # robot, touched where the two meet (a corner, the rim of a junction) and is no evidence
-    # for either (one touched by two points of the robot, a tip on a wall and its link's side
-    # on a post, is evidence for both)
-    n_read = len(rd.contact)
-    explains = np.array([np.abs(np.nan_to_num(h.res, nan=np.inf)) <= policy.k_sigma * sigma
-                         if h.res is not None else np.zeros(n_read, dtype=bool)
-                         for h in inf.selected], dtype=bool).reshape(-1, n_read)
     for k, h in enumerate(inf.selected):
         members = np.flatnonzero(inf.assignment == k)
         idx = inf.reading[members]
         post = np.maximum(inf.posterior[idx], 0.05)
         data = rd.fit_data(idx, post, free_points)
-        shared = np.zeros(len(idx), dtype=bool)
-        shared[rd.fit_order(rd.sphere[idx])] = np.delete(explains[:, idx], k, axis=0).any(axis=0)
         fit = h.fit
         if loss != "linear":
             robust = fit_primitive(h.kind, data, loss=loss, noise=sigma,
@@ -311,7 +300,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         open_touch[rd.fit_order(rd.sphere[idx])] = lying_flat(
             fit, rd, members, policy.k_sigma * sigma_kin, float(B))
         gate = report_gate(fit, data, sigma_kin, policy.max_rel_std, B=float(B),
-                           open_touch=open_touch, shared=shared)
+                           open_touch=open_touch)
         if not gate:
             messages.append(f"a {h.kind} on {len(members)} contacts not reported: "
                             f"{gate.reason}")

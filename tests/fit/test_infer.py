@@ -215,31 +215,6 @@ def test_report_gate_needs_one_contact_to_spare_so_a_wrong_reading_shows():
     assert report_gate(fit_primitive("circle", five), five, 3e-4, policy.max_rel_std)
 
 
-def test_report_gate_counts_only_the_contacts_no_other_primitive_explains():
-    # a circle touched by five tips, one of them where it meets another surface (a corner, the
-    # rim of a junction): that tip is no evidence for either, and without it four remain, no
-    # contact to spare; with a sixth tip of its own the circle is determined again
-    r, w = 0.06, 0.01
-    policy = FitPolicy()
-
-    def tips_at(deg: list[float]) -> FitData:
-        a = np.radians(np.asarray(deg))
-        tips = np.c_[np.cos(a), np.sin(a)] * (r + w)
-        return FitData.create(tips, w, 1.0, np.zeros((0, 2)), np.zeros((0, 2)), w, 1.0,
-                              free_points=np.array([[0.0, 0.5]]), dim=2)
-
-    five = tips_at([0.0, 60.0, 120.0, 180.0, 240.0])
-    fit = fit_primitive("circle", five)
-    assert report_gate(fit, five, 3e-4, policy.max_rel_std)
-    shared = np.array([False, False, False, False, True])
-    g = report_gate(fit, five, 3e-4, policy.max_rel_std, shared=shared)
-    assert not g
-    assert "only just determine" in g.reason
-    six = tips_at([0.0, 60.0, 120.0, 180.0, 240.0, 300.0])
-    assert report_gate(fit_primitive("circle", six), six, 3e-4, policy.max_rel_std,
-                       shared=np.r_[shared, False])
-
-
 def test_report_gate_needs_the_flat_type_told_from_a_surface_curved_at_b():
     b = 0.02  # B, the smallest expected curvature radius
     policy = FitPolicy()

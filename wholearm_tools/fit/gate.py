@@ -18,13 +18,6 @@ reaches the map when
   is wrong.  For the same reason it needs at least ``dof + 2`` contacts: on ``dof + 1``, the
   others less any one fit exactly, and a reading taken the wrong way bends the fit without
   leaving a residual that tells;
-* it rests on contacts of its own: a contact another selected primitive explains by the same
-  reading (the same point of the robot within ``k_sigma`` noise sigmas of both: where the two
-  meet, a corner, the rim of a junction) says nothing of which of the two is there, and every
-  test is made without it.  A fit through contacts of two surfaces and the edge between them
-  can hold them all within the noise with a contact to spare; without those the other surface
-  holds as well, it has none.  A contact touched by two points of the robot at once (a tip on
-  a wall and its link's side on a post) is evidence for both;
 * a flat primitive (line, plane) also has its **type** determined: its contacts tell it from a
   surface curved at the smallest expected radius ``B``.  The flat model is extended by the
   second-order term of a curved surface through its support, ``1/2 u^T K u`` in the in-plane
@@ -213,32 +206,20 @@ def joining_residuals(fit: FitResult, data: FitData, joining: ArrayLike) -> np.n
 
 
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
-                B: float | None = None, open_touch: ArrayLike | None = None,
-                shared: ArrayLike | None = None) -> GateResult:
+                B: float | None = None, open_touch: ArrayLike | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
     of a flat primitive needs ``B``; None skips it).  ``open_touch``: per row of ``data``
     (tips first, then links), contacts whose point of touch is open along a link lying flat
-    (:func:`lying_flat`), left out of the type test.  ``shared``: per row, contacts another
-    reported primitive explains as well (where the two meet); they say nothing of which of
-    the two is there, and every test is made without them."""
+    (:func:`lying_flat`), left out of the type test."""
     m = MODELS[fit.kind]
     touch = _touch_rows(fit, data)
     rows, pts, scale = touch if touch is not None else (np.zeros((0, m.dof)), None, 0.0)
-    spare = ""
-    if shared is not None and touch is not None:
-        own = ~np.asarray(shared, dtype=bool)
-        rows, pts = rows[own], pts[own]
-        if open_touch is not None:
-            open_touch = np.asarray(open_touch, dtype=bool)[own]
-        if not own.all():
-            spare = f" of its own ({np.count_nonzero(~own)} more another primitive explains)"
     n, dof = rows.shape
     if n <= dof + 1 or scale <= 0:
         return GateResult(math.inf, math.inf, -1,
-                          f"{n} contacts{spare} cannot determine its {dof} parameters"
-                          if n <= dof
-                          else f"its {n} contacts{spare}, less any one, only just determine its "
-                          f"{dof} parameters: a contact read the wrong way would not show")
+                          f"{n} contacts cannot determine its {dof} parameters" if n <= dof
+                          else f"its {n} contacts, less any one, only just determine its {dof} "
+                          "parameters: a contact read the wrong way would not show")
     s = sigma_kin / scale
     H = rows.T @ rows
 
