@@ -18,7 +18,10 @@ first obstruction → release).  Per run:
 * ``link``: paired detections whose link is the true event's link; ``group``: whose true link
   is among the candidates the joint signals leave (a rigid group; the fitted map decides);
 * ``lab``: tip/link labels right (tip or joint sphere = tip, side = link) among the paired
-  detections on the right link that eq. (2) decided; ``amb``: share left ambiguous.
+  detections on the right link that eq. (2) decided; a label is right when the named link
+  touched that way at the settled configuration (its paired event, or another true event on
+  that link in contact then: a tip held on one surface while the side rests on an edge makes
+  both labels true); ``amb``: share left ambiguous.
 
 The last rows give each column's total over the runs and its spread (min-max over seeds).
 Physics parameters can be swept (``--friction``, ``--joint-friction`` as a fraction of the
@@ -79,6 +82,9 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
     return run
 
 
+TOL = 0.05  # seconds: match_events' default pairing tolerance
+
+
 def score(run, B: float) -> dict:
     contacts = detect_contacts(run.log, run.robot)
     cls = tip_probability(run, contacts, B)
@@ -97,10 +103,18 @@ def score(run, B: float) -> dict:
     link_ok = ok & (np.asarray(contacts.link) == true_link)
     prior = np.asarray(contacts.link_prior)
     in_group = ok & (prior[np.arange(len(contacts)), np.maximum(true_link, 0)] > 0)
-    true_tip = truth.is_tip[np.maximum(mi, 0)]
     lab = np.asarray(cls.label)
     decided = link_ok & (lab != "ambiguous")
-    right = decided & ((lab == "tip") == true_tip)
+    # a label describes the settled configuration: where the named link touched with its tip
+    # and its side at once (a tip on one surface, the side on an edge), either label is right
+    ts = np.asarray(truth.contact_t)
+    te = np.where(np.isfinite(truth.contact_t_end), truth.contact_t_end, ts)
+    at = np.asarray(contacts.t_settle)[:, None]
+    there = ((np.asarray(truth.contact_link)[None] == np.asarray(contacts.link)[:, None])
+             & (ts[None] - TOL <= at) & (at <= te[None] + TOL))
+    there[np.flatnonzero(ok), mi[ok]] = True
+    is_tip = np.asarray(truth.is_tip, dtype=bool)[None]
+    right = decided & np.where(lab == "tip", (there & is_tip).any(1), (there & ~is_tip).any(1))
     return {"events": truth.n_contacts, "stop": int(stopped.sum()), "det": len(contacts),
             "found": int((hit & stopped).sum()), "paired": int(ok.sum()),
             "stops": len(stops), "stops_found": sum(bool(hit[g].any()) for g in stops.values()),
