@@ -12,7 +12,7 @@ from wholearm_tools.logs.records import JointLog
 
 def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_noise=0.003,
                   differentiate=False, seed=0, K=20.0, D=1.0, speed=0.8, fling=None,
-                  creep=None, push=None):
+                  creep=None, push=None, slide=None):
     """A guarded-move impedance log: ``moves`` = list of (target (n,), {joint: block_time}).
 
     Each move drives the commanded position toward ``target`` at ``speed`` rad/s per joint; a
@@ -24,6 +24,8 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     rad/s: the joint of the link in contact is not stopped but held back, creeping on at that
     speed towards its command (negative: pushed back, away from it).  ``push`` rad/s: the
     joint of the link in contact, at rest before, is pushed into motion at that speed.
+    ``slide`` ``(seconds, (n,) rad/s)``: on touching, the arm slides on at that velocity for
+    that long (a tip dragged along the surface, the link pivoting about it) before it stops.
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate
@@ -37,6 +39,7 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
     kick_until = -1.0
 
     creeping = np.zeros(n, bool)
+    sliding_until = -1.0
 
     def step(target, blocked):
         nonlocal t, q, qc
@@ -48,6 +51,8 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
                              q[creeping] + creep * dt * np.sign(qc - q)[creeping])
         if t < kick_until:
             new += kick * dt
+        if t < sliding_until:
+            new = q + np.asarray(slide[1], float) * dt
         qd_true = (new - q) / dt
         q = new
         ts.append(t)
@@ -66,6 +71,11 @@ def impedance_log(moves, *, n=3, rate=500.0, q_noise=2e-5, quantum=1e-4, qd_nois
         settled = 0
         while settled < round(0.1 * rate):
             for j, tb in blocks.items():
+                if (slide is not None and t - t0 >= tb and sliding_until < t0
+                        and not blocked[j]):
+                    sliding_until = t + slide[0]
+                if slide is not None and t - t0 >= tb and t < sliding_until:
+                    continue
                 if t - t0 >= tb and not blocked[j] and not creeping[j]:
                     blocked[: j + 1] = True  # joints 0..j stop when link j touches
                     if creep is not None or push is not None:
@@ -121,6 +131,24 @@ def test_the_approach_is_measured_before_the_impact_not_during_it():
     assert c.link.tolist() == [0]
     assert c.qd_before[0, 0] > 0.5
     assert np.all(np.abs(c.qd_before[0, 1:]) < 0.05)
+
+
+@pytest.mark.xfail(strict=True, reason="known limitation (issue 18): the approach is measured "
+                   "inside the slide; moving it before the slide (docs/method.md, open "
+                   "issues) made labels better but maps no better")
+def test_the_approach_of_a_contact_that_slid_is_the_motion_before_the_slide():
+    """Shoulder and elbow drive the arm into a surface at 0.8 rad/s; the tip touches and the
+    link pivots about it for 0.3 s: the surface pushes shoulder and elbow back against their
+    commands and swings the wrist, every joint loaded beyond the free motion and none pushing
+    along its motion, then the arm stops.  The motion that led into the contact, which
+    eq. (2) reads, is the approach (shoulder and elbow forward), not the slide's pivot."""
+    for seed in range(3):
+        log = impedance_log([([0.6, 0.5, 0.0], {2: 0.35})], slide=(0.3, [-0.1, -0.05, 0.4]),
+                            seed=seed)
+        c = detect_contacts(log)
+        assert len(c) == 1
+        assert np.all(c.qd_before[0, :2] > 0.5)
+        assert abs(c.qd_before[0, 2]) < 0.05
 
 
 def test_a_joint_the_contact_holds_back_without_stopping_it_names_the_link():
