@@ -82,14 +82,14 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
     return run
 
 
-TOL = 0.05  # seconds: match_events' default pairing tolerance
+TOL = 0.05  # seconds: how far apart a detection and a true event may be and still meet
 
 
 def score(run, B: float) -> dict:
     contacts = detect_contacts(run.log, run.robot)
     cls = tip_probability(run, contacts, B)
     truth = run.truth
-    mi = match_events(contacts, truth)
+    mi = match_events(contacts, truth, tol=TOL)
     ok = mi >= 0
     stopped = np.asarray(truth.contact_stopped, dtype=bool)
     hit = np.zeros(truth.n_contacts, dtype=bool)
