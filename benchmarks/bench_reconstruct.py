@@ -26,7 +26,9 @@ The last table gives the totals per scenario over the seeds (surfaces touched, w
 distinct contacts, found, determined by their contacts and found among those, off, extra,
 the largest size error, the size errors above 1 % and of those the ones beyond the 95 %
 interval the map states for that size: a size the contacts determine only to a few percent is
-reported with that interval, one off by more than its interval is wrong) and the CPU
+reported with that interval, one off by more than its interval is wrong; how many of all sizes
+lie within their stated interval, which honest 95 % intervals hold near 95 %, and the median
+interval half-width, which says how much they state) and the CPU
 seconds of ``reconstruct`` per run and per contact (one worker, so the figure does not
 depend on the machine's cores).
 
@@ -292,13 +294,15 @@ def main() -> None:
     print(f"\n## Totals over seeds {args.seeds} ({args.engine})\n")
     print(f"{'scenario':<14}{'runs':>5}{'touched':>8}{'dofcov':>7}{'found':>6}{'det':>5}"
           f"{'found/det':>10}{'off':>4}{'extra':>6}{'max size %':>11}{'>1 %':>5}"
-          f"{'beyond ci':>10}{'cpu s/run':>10}{'cpu s/contact':>14}")
+          f"{'beyond ci':>10}{'in ci':>8}{'med ci %':>9}{'cpu s/run':>10}"
+          f"{'cpu s/contact':>14}")
     for name in dict.fromkeys(r[0] for r in rows):
         rs = [r for r in rows if r[0] == name]
         b = [r[7] for r in rs]
         sizes = [x for bb in b for x in bb["size_pct"]]
         cis = [x for bb in b for x in bb["size_ci_pct"]]
         over = [(e, c) for e, c in zip(sizes, cis, strict=True) if e > 1.0]
+        within = f"{sum(e <= c for e, c in zip(sizes, cis, strict=True))}/{len(sizes)}"
         print(f"{name:<14}{len(rs):>5}{sum(x['touched'] for x in b):>8}"
               f"{sum(x['dof_cov'] for x in b):>7}{sum(x['found'] for x in b):>6}"
               f"{sum(x['determined'] for x in b):>5}"
@@ -306,6 +310,8 @@ def main() -> None:
               f"{sum(x['off'] for x in b):>4}{sum(x['extra'] for x in b):>6}"
               f"{max(sizes, default=0.0):>11.3f}{len(over):>5}"
               f"{sum(1 for e, c in over if not e <= c):>10}"
+              f"{within:>8}"
+              f"{np.nanmedian(cis) if cis else np.nan:>9.3f}"
               f"{np.mean([x['cpu'] for x in b]):>10.1f}"
               f"{np.mean([x['cpu'] / max(r[4], 1) for x, r in zip(b, rs, strict=True)]):>14.3f}")
     notes = {m for r in rows for m in r[10]}

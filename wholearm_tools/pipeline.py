@@ -222,6 +222,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     short) and ``messages`` say why.
     """
     from wholearm_tools.fit import fit_primitive
+    from wholearm_tools.fit.core import with_noise_floor
     from wholearm_tools.fit.data import FreeSpace
     from wholearm_tools.fit.gate import lying_flat, report_gate
     from wholearm_tools.fit.infer import DEFAULT_KINDS, infer, reading_posterior
@@ -290,7 +291,9 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         idx = inf.reading[members]
         post = np.maximum(inf.posterior[idx], 0.05)
         data = rd.fit_data(idx, post, free_points)
-        fit = h.fit
+        # the stated intervals take the residual variance of the whole map when a primitive's
+        # own few residuals fall below it (core.with_noise_floor)
+        fit = with_noise_floor(h.fit, data, sigma)
         if loss != "linear":
             robust = fit_primitive(h.kind, data, loss=loss, noise=sigma,
                                    initial=dict(h.fit.params), free_side=h.fit.free_side)

@@ -75,6 +75,45 @@ def test_covariance_matches_monte_carlo_spread():
     assert np.std(radii) == pytest.approx(np.mean(predicted), rel=0.25)
 
 
+def test_a_known_noise_floors_the_intervals_of_contacts_a_circle_fits_exactly():
+    """Six tips a circle fits exactly leave no residual to estimate the noise from: the fit's
+    own interval on the radius is nothing.  Given the contacts' noise, the interval is the one
+    that noise gives: sigma / sqrt(n) for tips all round, times the normal's 1.96 (the noise is
+    known, not estimated from these residuals); the parameters are unchanged."""
+    from wholearm_tools.fit.core import with_noise_floor
+
+    ang = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    pts = np.array([0.1, -0.2]) + 0.4 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    data = FitData.create(pts, free_points=[[2.0, 2.0]])
+    res = fit_primitive("circle", data)
+    lo, hi = res.ci95["radius"]
+    assert hi - lo < 1e-9
+    sigma = 1e-3
+    floored = with_noise_floor(res, data, sigma)
+    lo, hi = floored.ci95["radius"]
+    assert (hi - lo) / 2 == pytest.approx(1.96 * sigma / np.sqrt(6), rel=0.02)
+    assert floored.params["radius"] == res.params["radius"]
+    assert np.all(floored.params["center"] == res.params["center"])
+    # fit_primitive given the noise applies the same floor
+    given = fit_primitive("circle", data, noise=sigma)
+    assert given.ci95["radius"] == pytest.approx(floored.ci95["radius"], rel=1e-6)
+
+
+def test_a_noise_floor_below_the_residuals_leaves_the_intervals_as_they_were():
+    from wholearm_tools.fit.core import with_noise_floor
+
+    rng = np.random.default_rng(5)
+    p = {"center": np.array([0.0, 0.0, 0.1]), "radius": 0.5}
+    data = contacts("sphere", p, 14, 6, 1, rng, noise=0.003)
+    res = fit_primitive("sphere", data, free_side=1)
+    same = with_noise_floor(res, data, 1e-4)
+    assert same.ci95["radius"] == res.ci95["radius"]
+    np.testing.assert_array_equal(same.covariance, res.covariance)
+    wider = with_noise_floor(res, data, 0.03)
+    assert wider.ci95["radius"][1] - wider.ci95["radius"][0] > \
+        5 * (res.ci95["radius"][1] - res.ci95["radius"][0])
+
+
 def test_huber_downweights_an_outlier():
     rng = np.random.default_rng(11)
     p = {"center": np.array([0.0, 0.0, 0.1]), "radius": 0.5}

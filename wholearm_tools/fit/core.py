@@ -177,6 +177,7 @@ class _Norm:
     link_w: np.ndarray
     link_wt: np.ndarray
     space: FreeSpace
+    weight_mean: float = 1.0  # what the weights were divided by to bring them to mean 1
 
     @functools.cached_property
     def free(self) -> np.ndarray:
@@ -202,7 +203,7 @@ def _normalise(data: FitData) -> _Norm | None:
     wm = float(W.mean())
     return _Norm(
         mu, scale, c[:nt], data.tip_radius / scale, data.tip_weight / wm, c[nt:nt + nl],
-        c[nt + nl:], data.link_radius / scale, data.link_weight / wm, data.free,
+        c[nt + nl:], data.link_radius / scale, data.link_weight / wm, data.free, wm,
     )
 
 
@@ -451,10 +452,13 @@ def _solve_fast(m: Model, nd: _Norm, th0: np.ndarray, side: float, loss: str, de
 
 
 def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, delta: float,
-                     outliers: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Covariance of the raw parameters (normalised units; NaN when not determined) and the
-    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale).
-    Contacts flagged in ``outliers`` (read as outliers by a robust fit) do not count."""
+                     outliers: np.ndarray | None = None, noise: float | None = None
+                     ) -> tuple[np.ndarray, float, bool]:
+    """Covariance of the raw parameters (normalised units; NaN when not determined), the
+    sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale)
+    and whether the residual variance is ``noise``'s rather than the fit's own.  Contacts
+    flagged in ``outliers`` (read as outliers by a robust fit) do not count.  ``noise`` [m],
+    when known, is a floor under the residual variance (see :func:`with_noise_floor`)."""
     from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
     nt, nl = len(nd.tip), len(nd.a)
@@ -480,17 +484,23 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
         w_rob = np.where(outliers, 0.0, w_rob)
         n -= int(np.count_nonzero(outliers))
     if n <= m.dof:
-        return nan, sens
+        return nan, sens, False
     H = Jm.T @ (w_rob[:, None] * Jm)
     s2 = float(np.sum(w_rob * z * z) / (n - m.dof))
+    floor = _variance_floor(noise, nd.scale, nd.weight_mean) if noise is not None else 0.0
+    known = floor > s2
+    s2 = max(s2, floor)
     try:
         cond = np.linalg.cond(H)
         if not np.isfinite(cond) or cond > 1e14:
             raise np.linalg.LinAlgError
         Hi = np.linalg.inv(H)
     except np.linalg.LinAlgError:
-        return nan, sens
-    return s2 * Bn @ Hi @ Bn.T, sens
+        return nan, sens, False
+    return s2 * Bn @ Hi @ Bn.T, sens, known
+
+
+_Z975 = 1.959963984540054   # two-sided 95 % quantile of the normal
 
 
 @functools.lru_cache(maxsize=4096)
@@ -676,9 +686,11 @@ def fit_primitive(
     loss_scale : float
         ``d`` in units of ``noise``.
     noise : float or None
-        Residual noise level sigma in metres (used by robust losses); None estimates it: with
-        ``initial``, from a linear fit (1.4826 x median absolute weighted residual); without,
-        on the consensus inliers.
+        Residual noise level sigma in metres: the scale of a robust loss, and a floor under
+        the residual variance the covariance and intervals are scaled by (see
+        :func:`with_noise_floor`).  None: a robust loss estimates it (with ``initial``, from a
+        linear fit, 1.4826 x median absolute weighted residual; without, on the consensus
+        inliers) and the covariance takes the fit's own residual variance.
     initial : dict or None
         Initial map.json parameters; default algebraic guesses (several starts for
         cylinders, cones and tori), or the consensus start for a robust loss.
@@ -822,7 +834,7 @@ def fit_primitive(
     side = (next(iter(fits)) if len(fits) == 1 else
             _pick_side(m, nd, fits, _local_hints(nd) if local is None else local))
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
-                        covariance=covariance, outliers=outliers.get(side),
+                        covariance=covariance, outliers=outliers.get(side), noise=noise,
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
                         and len(nd.space) + len(nd.a) == 0)
@@ -858,9 +870,42 @@ def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
         raise InputError(f"initial parameters for a {m.kind} are invalid: {exc}") from None
 
 
+def _variance_floor(noise: float, scale: float, weight_mean: float) -> float:
+    """The residual variance, in a fit's normalised units (weights of mean 1), of contacts
+    each off by ``noise`` [m] standard deviation when its reading is the right one (a weight is
+    the probability that it is)."""
+    return (noise / scale) ** 2 / weight_mean
+
+
+def _intervals(m: Model, th: np.ndarray, cov_raw: np.ndarray, scale: float,
+               params: dict[str, Any], n: int, known: bool = False
+               ) -> tuple[np.ndarray, dict[str, tuple[Any, Any]]]:
+    """Covariance of the map.json parameters (metres) from that of the raw normalised ones,
+    and the 95 % intervals about ``params``: Student's t on ``n - dof`` for a residual
+    variance the fit estimated, the normal quantile for a ``known`` one (the map's, from many
+    more residuals)."""
+    Mj = _param_map_jacobian(m, th)
+    _, roles = _labels(m)
+    D = np.where(roles < 0, scale, 1.0)
+    cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
+    q = _Z975 if known else _t975(n - m.dof) if n > m.dof else np.nan
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
+    ci95: dict[str, tuple[Any, Any]] = {}
+    k = 0
+    for spec in m.params:
+        v = params[spec.name]
+        if spec.size == 1:
+            ci95[spec.name] = (float(v - sd[k]), float(v + sd[k]))
+        else:
+            ci95[spec.name] = (v - sd[k:k + spec.size], v + sd[k:k + spec.size])
+        k += spec.size
+    return cov, ci95
+
+
 def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
                  delta: float, labels: tuple[str, ...], ambiguous: bool,
-                 covariance: bool = True, outliers: np.ndarray | None = None) -> FitResult:
+                 covariance: bool = True, outliers: np.ndarray | None = None,
+                 noise: float | None = None) -> FitResult:
     th = sol.th.copy()
     if m.linear and side < 0:  # report lines and planes with the normal towards free space
         th[: m.dim] *= -1.0
@@ -873,28 +918,14 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     if not covariance:
         cov_raw, sens = None, math.nan
     elif sol.success:
-        cov_raw, sens = _covariance_norm(m, nd, sol, side, loss, delta, outliers)
+        cov_raw, sens, known = _covariance_norm(m, nd, sol, side, loss, delta, outliers,
+                                                noise)
     else:
-        cov_raw, sens = None, math.inf
+        cov_raw, sens, known = None, math.inf, False
     cov = ci = None
-    ci95: dict[str, tuple[Any, Any]] = {}
     if cov_raw is not None:
-        Mj = _param_map_jacobian(m, th)
-        _, roles = _labels(m)
-        D = np.where(roles < 0, nd.scale, 1.0)
-        cov = (D[:, None] * (Mj @ cov_raw @ Mj.T)) * D[None, :]
         n = data.n_contacts - (0 if outliers is None else int(np.count_nonzero(outliers)))
-        q = _t975(n - m.dof) if n > m.dof else np.nan
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * q
-        k = 0
-        for spec in m.params:
-            v = params[spec.name]
-            if spec.size == 1:
-                ci95[spec.name] = (float(v - sd[k]), float(v + sd[k]))
-            else:
-                ci95[spec.name] = (v - sd[k:k + spec.size], v + sd[k:k + spec.size])
-            k += spec.size
-        ci = ci95
+        cov, ci = _intervals(m, th, cov_raw, nd.scale, params, n, known)
     W = np.concatenate([data.tip_weight, data.link_weight])
     W = W / W.mean()
     r_all = np.concatenate([rt_m, rl_m])
@@ -925,6 +956,37 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
         link_residuals=rl_m, link_t=t, rms_residual=rms, primitive=prim,
         sensitivity=sens / nd.scale, scale=nd.scale,
     )
+
+
+def with_noise_floor(fit: FitResult, data: FitData, noise: float) -> FitResult:
+    """``fit`` (a least-squares fit of ``data``) with its covariance and 95 % intervals scaled
+    to a residual variance of at least ``noise`` [m] squared.
+
+    A fit's own residuals estimate the contacts' noise from ``n - dof`` degrees of freedom: a
+    few contacts that a family of primitives nearly fits exactly (link sides tangent to one
+    sweep plane) leave residuals far below the noise of the process that made them, and
+    intervals that the fit's error lies beyond.  The whole map's residuals estimate that
+    noise from many more; the intervals use the larger of the two (with the normal quantile
+    where the map's is used: it is known from so many residuals that Student's t on them is
+    the normal).  The parameters are unchanged.  ``noise`` is the floor :func:`fit_primitive`
+    applies when it is given one."""
+    if fit.covariance is None or not fit.success or not fit.params:
+        return fit
+    m = MODELS[fit.kind]
+    n = data.n_contacts
+    nd = _normalise(data)
+    if nd is None or n <= m.dof:
+        return fit
+    r, t = residuals_and_touch(fit.kind, fit.params, data, fit.free_side)
+    w = np.concatenate([data.tip_weight, data.link_weight])
+    own = float(np.sum(w * r * r)) / nd.weight_mean / (n - m.dof) / nd.scale ** 2
+    if not _variance_floor(noise, nd.scale, nd.weight_mean) > own:
+        return fit
+    th = _raw_from_params(m, fit.params, nd)
+    sol = _Solve(th, t, np.ones(len(t), bool), fit.status, True, fit.iterations, fit.cost)
+    cov_raw, _, known = _covariance_norm(m, nd, sol, fit.free_side, "linear", 1.0, noise=noise)
+    cov, ci95 = _intervals(m, th, cov_raw, nd.scale, fit.params, n, known)
+    return dataclasses.replace(fit, covariance=cov, ci95=ci95)
 
 
 def other_side(fit: FitResult) -> FitResult:
