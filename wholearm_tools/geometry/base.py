@@ -290,12 +290,3 @@ def primitive_from_dict(data: Mapping[str, Any]) -> Primitive:
         raise InputError(
             f"expected a primitive as {{'type': ..., 'params': ...}}, got {data!r}") from None
     return primitive_type(str(kind)).from_params(params)
-
-
-def _segment_min_numeric(
-    fn: Callable[[FloatArray], FloatArray], a: ArrayLike, b: ArrayLike, dim: int,
-    samples: int = 33, iterations: int = 3,
-) -> tuple[FloatArray, FloatArray]:
-    """Backwards-compatible wrapper: validate ``a``, ``b`` then :func:`segment_min_numeric`."""
-    a_, b_, _ = as_segments(a, b, dim)
-    return segment_min_numeric(fn, a_, b_, samples=samples, levels=iterations)

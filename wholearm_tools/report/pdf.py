@@ -111,10 +111,6 @@ def fmt_pm(value: float, half: float | None, *, scale: float = 1.0, unit: str = 
     return f"{_num(value * scale, dec)} ± {_sig2(abs(half) * scale)}{unit}"
 
 
-def _fmt_len(x: float) -> str:
-    return f"{_num(x * 1e3, 1)} mm" if abs(x) < 1.0 else f"{_num(x, 3)} m"
-
-
 def _pct(x: float) -> str:
     return f"{100 * x:.0f} %" if math.isfinite(x) else "n/a"
 

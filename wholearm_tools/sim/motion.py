@@ -115,16 +115,3 @@ class PolylinePath:
         dq_dlam = (b - a) / np.where(seg_len > 0, seg_len, 1.0)[:, None]
         qd = dq_dlam * (sd * self.length)[:, None]
         return q, qd
-
-
-def polyline_point(vertices: FloatArray, fraction: float) -> tuple[FloatArray, int]:
-    """Point at ``fraction`` of the joint-space (Euclidean) length of ``vertices``.
-
-    Returns the point and the index of the segment's start vertex.
-    """
-    seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    target = fraction * cum[-1]
-    i = int(np.clip(np.searchsorted(cum, target, side="right") - 1, 0, len(seg) - 1))
-    f = 0.0 if seg[i] <= 0 else (target - cum[i]) / seg[i]
-    return vertices[i] + f * (vertices[i + 1] - vertices[i]), i
