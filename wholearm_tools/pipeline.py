@@ -291,14 +291,15 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         idx = inf.reading[members]
         post = np.maximum(inf.posterior[idx], 0.05)
         data = rd.fit_data(idx, post, free_points)
-        # the stated intervals take the residual variance of the whole map when a primitive's
-        # own few residuals fall below it (core.with_noise_floor)
-        fit = with_noise_floor(h.fit, data, sigma)
+        fit = h.fit
         if loss != "linear":
             robust = fit_primitive(h.kind, data, loss=loss, noise=sigma,
                                    initial=dict(h.fit.params), free_side=h.fit.free_side)
             if robust:
                 fit = robust
+        # the intervals the map states are those of the error model the gate judges it by:
+        # contacts off by sigma_kin, or by the fit's own residuals where they are larger
+        fit = with_noise_floor(fit, data, sigma_kin)
         open_touch = np.empty(len(idx), dtype=bool)
         open_touch[rd.fit_order(rd.sphere[idx])] = lying_flat(
             fit, rd, members, policy.k_sigma * sigma_kin, float(B))

@@ -458,7 +458,7 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
     sensitivity (see :attr:`FitResult.sensitivity`, normalised units: divide by the scale)
     and whether the residual variance is ``noise``'s rather than the fit's own.  Contacts
     flagged in ``outliers`` (read as outliers by a robust fit) do not count.  ``noise`` [m],
-    when known, is a floor under the residual variance (see :func:`with_noise_floor`)."""
+    when given, is a floor under the residual variance (see :func:`with_noise_floor`)."""
     from wholearm_tools.fit.solve import sd_and_jacobian, tangent_basis
 
     nt, nl = len(nd.tip), len(nd.a)
@@ -686,11 +686,9 @@ def fit_primitive(
     loss_scale : float
         ``d`` in units of ``noise``.
     noise : float or None
-        Residual noise level sigma in metres: the scale of a robust loss, and a floor under
-        the residual variance the covariance and intervals are scaled by (see
-        :func:`with_noise_floor`).  None: a robust loss estimates it (with ``initial``, from a
-        linear fit, 1.4826 x median absolute weighted residual; without, on the consensus
-        inliers) and the covariance takes the fit's own residual variance.
+        Residual noise level sigma in metres (used by robust losses); None estimates it: with
+        ``initial``, from a linear fit (1.4826 x median absolute weighted residual); without,
+        on the consensus inliers.
     initial : dict or None
         Initial map.json parameters; default algebraic guesses (several starts for
         cylinders, cones and tori), or the consensus start for a robust loss.
@@ -834,7 +832,7 @@ def fit_primitive(
     side = (next(iter(fits)) if len(fits) == 1 else
             _pick_side(m, nd, fits, _local_hints(nd) if local is None else local))
     return _make_result(m, data, nd, fits[side], side, loss, deltas[side], labels,
-                        covariance=covariance, outliers=outliers.get(side), noise=noise,
+                        covariance=covariance, outliers=outliers.get(side),
                         ambiguous=len(fits) > 1 and abs(fits[1.0].cost - fits[-1.0].cost)
                         <= 1e-12 + 1e-6 * max(fits[1.0].cost, fits[-1.0].cost)
                         and len(nd.space) + len(nd.a) == 0)
@@ -882,8 +880,7 @@ def _intervals(m: Model, th: np.ndarray, cov_raw: np.ndarray, scale: float,
                ) -> tuple[np.ndarray, dict[str, tuple[Any, Any]]]:
     """Covariance of the map.json parameters (metres) from that of the raw normalised ones,
     and the 95 % intervals about ``params``: Student's t on ``n - dof`` for a residual
-    variance the fit estimated, the normal quantile for a ``known`` one (the map's, from many
-    more residuals)."""
+    variance the fit estimated, the normal quantile for a ``known`` (stated) one."""
     Mj = _param_map_jacobian(m, th)
     _, roles = _labels(m)
     D = np.where(roles < 0, scale, 1.0)
@@ -904,8 +901,7 @@ def _intervals(m: Model, th: np.ndarray, cov_raw: np.ndarray, scale: float,
 
 def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, loss: str,
                  delta: float, labels: tuple[str, ...], ambiguous: bool,
-                 covariance: bool = True, outliers: np.ndarray | None = None,
-                 noise: float | None = None) -> FitResult:
+                 covariance: bool = True, outliers: np.ndarray | None = None) -> FitResult:
     th = sol.th.copy()
     if m.linear and side < 0:  # report lines and planes with the normal towards free space
         th[: m.dim] *= -1.0
@@ -918,8 +914,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     if not covariance:
         cov_raw, sens = None, math.nan
     elif sol.success:
-        cov_raw, sens, known = _covariance_norm(m, nd, sol, side, loss, delta, outliers,
-                                                noise)
+        cov_raw, sens, known = _covariance_norm(m, nd, sol, side, loss, delta, outliers)
     else:
         cov_raw, sens, known = None, math.inf, False
     cov = ci = None
@@ -959,17 +954,18 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
 
 
 def with_noise_floor(fit: FitResult, data: FitData, noise: float) -> FitResult:
-    """``fit`` (a least-squares fit of ``data``) with its covariance and 95 % intervals scaled
-    to a residual variance of at least ``noise`` [m] squared.
+    """``fit`` (of ``data``) with its covariance and 95 % intervals taken at a residual
+    variance of at least ``noise`` [m] squared: the position error of a contact that a stated
+    error model gives (the arm's kinematic errors), where the fit's own residuals say less.
 
-    A fit's own residuals estimate the contacts' noise from ``n - dof`` degrees of freedom: a
-    few contacts that a family of primitives nearly fits exactly (link sides tangent to one
-    sweep plane) leave residuals far below the noise of the process that made them, and
-    intervals that the fit's error lies beyond.  The whole map's residuals estimate that
-    noise from many more; the intervals use the larger of the two (with the normal quantile
-    where the map's is used: it is known from so many residuals that Student's t on them is
-    the normal).  The parameters are unchanged.  ``noise`` is the floor :func:`fit_primitive`
-    applies when it is given one."""
+    A fit's own residuals see only the scatter of its contacts about it: not the errors they
+    share (a joint offset, a link-length error, the compliance of the contact, which shift
+    contacts alike), and, from the ``n - dof`` residuals of a few contacts that a family of
+    primitives fits nearly exactly, hardly the scatter.  The intervals would state a precision
+    the arm cannot give.  They use the larger of the two variances, with the normal quantile
+    where ``noise``'s is used (it is stated, not estimated from these residuals).  The
+    parameters are unchanged; a robust fit's covariance, where the floor applies (its
+    residuals are then all small), is recomputed with every contact at full weight."""
     if fit.covariance is None or not fit.success or not fit.params:
         return fit
     m = MODELS[fit.kind]
