@@ -842,9 +842,10 @@ def _detail_pages(data: Any, junction: JunctionSummary | None,
                   accuracy: AccuracyReport | None) -> list[Any]:
     """The junction's details, every parameter, the residuals, the P_T replay and the
     accuracy against ground truth, flowing over as many pages as they fill."""
-    flow = _Flow("Details", "parameters ± 95 % half-widths (Student t on the weighted "
-                 "Gauss–Newton covariance); support = tip / link contacts; robot base frame, "
-                 "millimetres and degrees")
+    flow = _Flow("Details", "parameters ± 95 % half-widths (weighted Gauss–Newton "
+                 "covariance at the stated kinematic error, or at the fit's residuals where "
+                 "larger); support = tip / link contacts; robot base frame, millimetres and "
+                 "degrees")
     if junction is not None:
         flow.heading(f"Well junction: main bore #{junction.main_id}, lateral "
                      f"#{junction.lateral_id} (± = 95 % from {junction.samples} Monte Carlo "
