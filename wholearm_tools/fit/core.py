@@ -912,7 +912,7 @@ def _make_result(m: Model, data: FitData, nd: _Norm, sol: _Solve, side: float, l
     params = _denormalise(m, m.to_params(th), nd)
     # covariance (normalised raw) -> map params -> metres
     if not covariance:
-        cov_raw, sens = None, math.nan
+        cov_raw, sens, known = None, math.nan, False
     elif sol.success:
         cov_raw, sens, known = _covariance_norm(m, nd, sol, side, loss, delta, outliers)
     else:
