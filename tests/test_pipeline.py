@@ -270,6 +270,20 @@ def test_map_label_decides_only_beyond_the_kinematic_error(reach, label):
     assert np.all(out.label_map[:-1] == "tip")
 
 
+@pytest.mark.parametrize("reach", [1.0, 0.2])
+def test_the_stated_radius_interval_carries_the_kinematic_error(reach):
+    """Twelve tips exactly on a post: their residuals are nothing, but the arm that measured
+    them is known only to its kinematic error (5e-4 of its reach).  The map states the radius
+    to within the 95 % interval that error gives over twelve tips all round,
+    1.96 sigma_kin / sqrt(12), not to the residuals' zero; the radius itself is exact."""
+    table = _table(_circle_tips(12, r=0.08, w=0.01))
+    smap, _, _, _ = fit_table(table, planar=True, B=0.02, noise_floor=1e-5, reach=reach)
+    [post] = smap.primitives
+    assert post.params["radius"] == pytest.approx(0.08, abs=1e-9)
+    sigma_kin = 5e-4 * reach
+    assert float(post.ci95["radius"]) == pytest.approx(1.96 * sigma_kin / np.sqrt(12), rel=0.05)
+
+
 def test_map_refined_labels_are_right_and_leave_fewer_ambiguous(short_lab_run):
     """The fitted map resolves contacts eq. (2) left ambiguous, without mislabelling."""
     from wholearm_tools.contacts import pair_events
