@@ -487,7 +487,9 @@ def _covariance_norm(m: Model, nd: _Norm, sol: _Solve, side: float, loss: str, d
         return nan, sens, False
     H = Jm.T @ (w_rob[:, None] * Jm)
     s2 = float(np.sum(w_rob * z * z) / (n - m.dof))
-    floor = _variance_floor(noise, nd.scale, nd.weight_mean) if noise is not None else 0.0
+    # contacts each off by ``noise`` when their reading is the right one (a weight is the
+    # probability that it is), in normalised units with the weights brought to mean 1
+    floor = (noise / nd.scale) ** 2 / nd.weight_mean if noise is not None else 0.0
     known = floor > s2
     s2 = max(s2, floor)
     try:
@@ -868,13 +870,6 @@ def _raw_from_params(m: Model, params: dict[str, Any], nd: _Norm) -> np.ndarray:
         raise InputError(f"initial parameters for a {m.kind} are invalid: {exc}") from None
 
 
-def _variance_floor(noise: float, scale: float, weight_mean: float) -> float:
-    """The residual variance, in a fit's normalised units (weights of mean 1), of contacts
-    each off by ``noise`` [m] standard deviation when its reading is the right one (a weight is
-    the probability that it is)."""
-    return (noise / scale) ** 2 / weight_mean
-
-
 def _intervals(m: Model, th: np.ndarray, cov_raw: np.ndarray, scale: float,
                params: dict[str, Any], n: int, known: bool = False
                ) -> tuple[np.ndarray, dict[str, tuple[Any, Any]]]:
@@ -973,14 +968,12 @@ def with_noise_floor(fit: FitResult, data: FitData, noise: float) -> FitResult:
     nd = _normalise(data)
     if nd is None or n <= m.dof:
         return fit
-    r, t = residuals_and_touch(fit.kind, fit.params, data, fit.free_side)
-    w = np.concatenate([data.tip_weight, data.link_weight])
-    own = float(np.sum(w * r * r)) / nd.weight_mean / (n - m.dof) / nd.scale ** 2
-    if not _variance_floor(noise, nd.scale, nd.weight_mean) > own:
-        return fit
     th = _raw_from_params(m, fit.params, nd)
+    t = _link_t(m, th, fit.free_side, nd.a, nd.b, values=False)[1] if len(nd.a) else np.zeros(0)
     sol = _Solve(th, t, np.ones(len(t), bool), fit.status, True, fit.iterations, fit.cost)
     cov_raw, _, known = _covariance_norm(m, nd, sol, fit.free_side, "linear", 1.0, noise=noise)
+    if not known:    # the fit's own residuals say more than the floor: keep its covariance
+        return fit
     cov, ci95 = _intervals(m, th, cov_raw, nd.scale, fit.params, n, known)
     return dataclasses.replace(fit, covariance=cov, ci95=ci95)
 
