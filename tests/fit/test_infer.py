@@ -480,3 +480,25 @@ def test_a_fit_on_a_neighbouring_member_of_a_tangent_family_is_captured_by_the_r
     # nothing to capture where the contacts within the tolerance are the fit's own
     assert _captured("circle", rd, fit, _residuals_of(fit, rd, np.arange(len(rd))), tol, None,
                      0.1 * sigma, members=np.arange(12)) is None
+
+
+def test_a_slot_is_two_walls_because_the_noise_level_stays_within_the_kinematic_error():
+    """Tips touch the floor and the ceiling of a slot 6 cm high over the same stretch, ten
+    each, 50 um noise.  Every seed's nearest contacts straddle both walls, so the seeds' plain
+    fits measure the slot (mm), not the noise; at that noise level one plane midway explains
+    every contact.  The noise level never exceeds the stated kinematic error (0.4 mm on this
+    0.8 m arm): residuals beyond it are contacts on another surface, not noise, and the
+    floor and the ceiling are two planes."""
+    rng = np.random.default_rng(1)
+    n, w, gap = 10, 0.02, 0.06
+    xy = rng.uniform(-0.2, 0.2, (2 * n, 2))
+    z = np.r_[np.full(n, w), np.full(n, gap - w)] + rng.normal(0.0, 5e-5, 2 * n)
+    pts = np.c_[xy, z]
+    rd = readings_from_contacts(np.zeros(2 * n, int), np.full(2 * n, 0.95), pts,
+                                np.full(2 * n, w), pts, pts, np.full(2 * n, w))
+    inf = infer(rd, kinds=("plane", "sphere", "cylinder"), B=0.05, noise_floor=1e-5, rng=0,
+                reach=0.8)
+    assert inf.sigma < 1e-4
+    assert [h.kind for h in inf.selected] == ["plane", "plane"]
+    walls = sorted(tuple(np.flatnonzero(inf.assignment == k)) for k in range(2))
+    assert walls == [tuple(range(n)), tuple(range(n, 2 * n))]

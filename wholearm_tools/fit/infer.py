@@ -35,7 +35,10 @@ A proposer never accepts or rejects: selection minimises the score (greedy addit
 single additions, removals and swaps until it stops falling).  Assignment (each contact to its
 cheapest primitive and reading, posterior reading weights) and refits alternate with selection
 until the score stops falling — the classification is the E-step of the fit.  The noise level
-is re-estimated from the assigned residuals at each round.
+is re-estimated from the assigned residuals at each round, and never exceeds the stated
+kinematic error (the report gate's error model): residuals beyond it are contacts on another
+surface, not noise, and a noise level that took them in would let one primitive explain the
+contacts of two.
 
 What reaches the map is decided once, by :mod:`wholearm_tools.fit.gate`.
 """
@@ -841,9 +844,13 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     scorer = Scorer(readings, policy, sigma, extent, swept, base_pt, B)
     key = int(rng.integers(2**63))
 
+    # the stated kinematic error: the report gate's error model, and the most noise the
+    # inference may assume
+    sigma_kin = policy.kinematic_error * (reach or extent)
+
     def sigma_id(sig: float) -> float:
         """The kinematic error a proposal is judged determined at (as the report gate)."""
-        return max(sig, policy.kinematic_error * (reach or extent))
+        return max(sig, sigma_kin)
 
     def context(sig: float, known: bool) -> _Context:
         tol = max(30.0 * sig, 1e-3 * extent)
@@ -1034,8 +1041,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         plain = _plain_many(context(sigma, False), anchors, executor)
         best = [min((_rms_dof(f) for f in fits.values() if f), default=math.inf)
                 for fits in plain]
-        sigma = max(_noise_from_seeds(np.array([b for b in best if math.isfinite(b)])),
-                    floor)
+        # seeds whose nearest contacts straddle two surfaces (a junction, a slot) measure the
+        # mismatch, not the noise
+        sigma = min(max(_noise_from_seeds(np.array([b for b in best if math.isfinite(b)])),
+                        floor), max(sigma_kin, floor))
         scorer.set_sigma(sigma)
         if diagnostics is not None:
             diagnostics["sigma_seeds"] = (sigma, sorted(best))
@@ -1069,7 +1078,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             if policy.noise is None and chosen:
                 R = np.concatenate([np.abs(h.res[scorer.best_reading(h)[assign == i]])
                                     for i, h in enumerate(chosen)])
-                s_new = max(truncated_sigma(R, scorer.sigma, policy.k_sigma), floor)
+                s_new = min(max(truncated_sigma(R, scorer.sigma, policy.k_sigma), floor),
+                            max(sigma_kin, floor))
                 if abs(s_new - scorer.sigma) > 0.05 * scorer.sigma:
                     scorer.set_sigma(s_new)
         # ---- further proposals: unions, simpler types, seeds among unexplained contacts
