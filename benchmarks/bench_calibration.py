@@ -13,7 +13,6 @@ Run:  .venv/bin/python benchmarks/bench_calibration.py [--engine physics] [--see
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import sys
 import warnings
@@ -23,20 +22,16 @@ import numpy as np
 
 from wholearm_tools.classify import swept_map, tip_probability
 from wholearm_tools.contacts import detect_contacts, match_events
-from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
+from wholearm_tools.sim.scenarios import load_scenario
 
 EDGES = (0.0, 1e-3, 1e-2, 0.05, 0.2, 0.5, 0.8, 0.95, 0.99, 0.999, 1.0 + 1e-9)
 
 
 def main() -> None:
     sys.path.insert(0, str(Path(__file__).parent))
-    from bench_events import add_run_options, get_run, seeds_arg
+    from bench_events import get_run, scenarios_parser
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0-9", type=seeds_arg)
-    ap.add_argument("--scenarios", default=",".join(list_scenarios()))
-    add_run_options(ap, "kinematic")
-    args = ap.parse_args()
+    args = scenarios_parser(__doc__, "kinematic", "0-9").parse_args()
     warnings.simplefilter("ignore")
     p_tip, is_tip = [], []
     for name in args.scenarios.split(","):

@@ -15,7 +15,6 @@ Run:  .venv/bin/python benchmarks/bench_contact_error.py [--engine physics] [--s
 
 from __future__ import annotations
 
-import argparse
 import sys
 import warnings
 from pathlib import Path
@@ -24,7 +23,6 @@ import numpy as np
 
 from wholearm_tools.contacts import detect_contacts, match_events
 from wholearm_tools.geometry.base import primitive_from_dict
-from wholearm_tools.sim.scenarios import list_scenarios
 
 PERCENTILES = (50, 90, 95, 99)
 
@@ -64,13 +62,9 @@ def row(label: str, errors: list[float]) -> str:
 
 def main() -> None:
     sys.path.insert(0, str(Path(__file__).parent))
-    from bench_events import add_run_options, get_run, seeds_arg
+    from bench_events import get_run, scenarios_parser
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0-9", type=seeds_arg)
-    ap.add_argument("--scenarios", default=",".join(list_scenarios()))
-    add_run_options(ap, "kinematic")
-    args = ap.parse_args()
+    args = scenarios_parser(__doc__, "kinematic", "0-9").parse_args()
     warnings.simplefilter("ignore")
     by_scenario: dict[str, list[float]] = {}
     by_kind: dict[str, list[float]] = {}

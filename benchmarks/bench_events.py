@@ -144,11 +144,18 @@ def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
     ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0-2", type=seeds_arg)
+def scenarios_parser(doc: str, engine: str, seeds: str) -> argparse.ArgumentParser:
+    """A benchmark over scenarios × seeds: ``--seeds``, ``--scenarios`` (every bundled one by
+    default) and the run options of :func:`add_run_options`."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--seeds", default=seeds, type=seeds_arg)
     ap.add_argument("--scenarios", default=",".join(list_scenarios()))
-    add_run_options(ap, "physics")
+    add_run_options(ap, engine)
+    return ap
+
+
+def main() -> None:
+    ap = scenarios_parser(__doc__, "physics", "0-2")
     ap.add_argument("--list", action="store_true", help="list missed, false and wrong-link")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
