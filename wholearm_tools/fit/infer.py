@@ -848,6 +848,10 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
     # inference may assume
     sigma_kin = policy.kinematic_error * (reach or extent)
 
+    def bounded(sig: float) -> float:
+        """An estimated noise level held between the run's floor and the kinematic error."""
+        return min(max(sig, floor), max(sigma_kin, floor))
+
     def sigma_id(sig: float) -> float:
         """The kinematic error a proposal is judged determined at (as the report gate)."""
         return max(sig, sigma_kin)
@@ -1043,8 +1047,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
                 for fits in plain]
         # seeds whose nearest contacts straddle two surfaces (a junction, a slot) measure the
         # mismatch, not the noise
-        sigma = min(max(_noise_from_seeds(np.array([b for b in best if math.isfinite(b)])),
-                        floor), max(sigma_kin, floor))
+        sigma = bounded(_noise_from_seeds(np.array([b for b in best if math.isfinite(b)])))
         scorer.set_sigma(sigma)
         if diagnostics is not None:
             diagnostics["sigma_seeds"] = (sigma, sorted(best))
@@ -1078,8 +1081,7 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
             if policy.noise is None and chosen:
                 R = np.concatenate([np.abs(h.res[scorer.best_reading(h)[assign == i]])
                                     for i, h in enumerate(chosen)])
-                s_new = min(max(truncated_sigma(R, scorer.sigma, policy.k_sigma), floor),
-                            max(sigma_kin, floor))
+                s_new = bounded(truncated_sigma(R, scorer.sigma, policy.k_sigma))
                 if abs(s_new - scorer.sigma) > 0.05 * scorer.sigma:
                     scorer.set_sigma(s_new)
         # ---- further proposals: unions, simpler types, seeds among unexplained contacts
