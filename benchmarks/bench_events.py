@@ -23,6 +23,9 @@ first obstruction → release).  Per run:
   that link in contact then: a tip held on one surface while the side rests on an edge makes
   both labels true); ``amb``: share left ambiguous.
 
+Last, how often the named link is right by its share ``p_link`` (contacts.csv), over the
+detections whose rigid group left several links: a calibrated share is right that often.
+
 The last rows give each column's total over the runs and its spread (min-max over seeds).
 Physics parameters can be swept (``--friction``, ``--joint-friction`` as a fraction of the
 effort limit, ``--gravity``) to check that the figures hold beyond the defaults.
@@ -36,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import time
 import warnings
 from pathlib import Path
@@ -102,6 +106,9 @@ def score(run, B: float) -> dict:
     true_link = np.where(ok, truth.contact_link[np.maximum(mi, 0)], -1)
     link_ok = ok & (np.asarray(contacts.link) == true_link)
     prior = np.asarray(contacts.link_prior)
+    # detections whose rigid group left several links: the named link's share (p_link)
+    multi = ok & (np.count_nonzero(prior > 0, axis=1) >= 2)
+    p_link = prior[np.arange(len(contacts)), np.asarray(contacts.link)]
     in_group = ok & (prior[np.arange(len(contacts)), np.maximum(true_link, 0)] > 0)
     lab = np.asarray(cls.label)
     decided = link_ok & (lab != "ambiguous")
@@ -121,6 +128,7 @@ def score(run, B: float) -> dict:
             "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()),
             "decided": int(decided.sum()),
             "right": int(right.sum()), "amb": int((link_ok & (lab == "ambiguous")).sum()),
+            "shares": [(float(p_link[i]), bool(link_ok[i])) for i in np.flatnonzero(multi)],
             "missed": [(round(float(truth.contact_t[j]), 3), int(truth.contact_link[j]),
                         str(truth.contact_kind[j])) for j in np.flatnonzero(stopped & ~hit)],
             "false": [(round(float(contacts.t[i]), 3), int(contacts.link[i]))
@@ -205,6 +213,27 @@ def main() -> None:
         v = [rate(r[a], r[b]) for r in rows if r[b]]
         spread.append(f"{c} {min(v):.3f}-{max(v):.3f}" if v else f"{c} -")
     print("spread over runs: " + ", ".join(spread))
+    print_share_calibration([x for r in rows for x in r["shares"]])
+
+
+#: bins of the named link's share within a rigid group (p_link of contacts.csv)
+SHARE_BINS = (0.0, 0.55, 0.65, 0.75, 0.85, 0.95, 1.0 + 1e-9)
+
+
+def print_share_calibration(shares: list[tuple[float, bool]]) -> None:
+    """How often the named link is right, by its share, over the detections whose rigid
+    group left several links: a calibrated share is right that often."""
+    if not shares:
+        return
+    p = np.array([s for s, _ in shares])
+    ok = np.array([r for _, r in shares])
+    cells = []
+    for lo, hi in itertools.pairwise(SHARE_BINS):
+        sel = (p >= lo) & (p < hi)
+        n = int(sel.sum())
+        cells.append(f"[{lo:.2f},{min(hi, 1.0):.2f}) {rate(int(ok[sel].sum()), n):.2f} of {n}")
+    print(f"link right by p_link, {len(p)} detections left among a rigid group's links "
+          f"(right {ok.mean():.3f}): " + "; ".join(cells))
 
 
 if __name__ == "__main__":

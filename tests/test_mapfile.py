@@ -76,7 +76,8 @@ def sample_table(dim: int = 2) -> ContactTable:
         p_tip_map=np.array([0.99, 0.01, np.nan, 0.0, 1.0]),
         label_map=np.array(["tip", "link", "", "link", "tip"]),
         link_by_map=np.array([0, 2, -1, 0, 1]),
-        t_settle=np.arange(m) * 1.5 + 0.2, t_end=np.array([0.5, 2.0, np.nan, 5.0, 6.5]))
+        t_settle=np.arange(m) * 1.5 + 0.2, t_end=np.array([0.5, 2.0, np.nan, 5.0, 6.5]),
+        p_link=np.array([1.0, 0.55, 0.45, 1.0, 0.9]))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -96,19 +97,21 @@ def test_contact_table_csv_round_trip(tmp_path, dim: int) -> None:
     np.testing.assert_array_equal(back.link_by_map, table.link_by_map)
     np.testing.assert_allclose(back.t_settle, table.t_settle)
     np.testing.assert_allclose(back.t_end, table.t_end, equal_nan=True)
+    np.testing.assert_allclose(back.p_link, table.p_link)
 
 
 def test_contact_table_without_event_times_reads_them_as_unknown(tmp_path) -> None:
     """A table written before the event columns (or by hand) still reads: its contacts are
     moments at ``t``, and scoring pairs them by time alone."""
     header, rows = sample_table().rows()
-    keep = [h for h in header if h not in ("t_settle", "t_end")]
+    keep = [h for h in header if h not in ("t_settle", "t_end", "p_link")]
     path = tmp_path / "contacts.csv"
     path.write_text(",".join(keep) + "\n"
                     + "\n".join(",".join(r[h] for h in keep) for r in rows) + "\n")
     back = read_contact_table(path)
     assert np.all(np.isnan(back.t_settle))
     assert np.all(np.isnan(back.t_end))
+    assert np.all(np.isnan(back.p_link))
 
 
 def test_contact_table_errors(tmp_path) -> None:
@@ -125,6 +128,12 @@ def test_contact_table_errors(tmp_path) -> None:
         read_contact_table(path)
     path.write_text(sample_table().to_csv().replace(",tip,", ",maybe,", 1))
     with pytest.raises(InputError, match="unknown contact labels"):
+        read_contact_table(path)
+    header, rows = sample_table().rows()
+    rows[1]["p_link"] = "1.5"
+    path.write_text(",".join(header) + "\n"
+                    + "\n".join(",".join(r[h] for h in header) for r in rows) + "\n")
+    with pytest.raises(InputError, match="p_link must lie in"):
         read_contact_table(path)
     path.write_text(sample_table().to_csv().replace(",0.990000,", ",often,", 1))
     with pytest.raises(InputError, match="bad value in column 'p_tip_map'"):

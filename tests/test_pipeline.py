@@ -299,3 +299,30 @@ def test_map_refined_labels_are_right_and_leave_fewer_ambiguous(short_lab_run):
     amb_eq2 = np.mean(table.label[ok] == "ambiguous")
     amb_map = np.mean(table.label_map[ok] == "ambiguous")
     assert amb_map < 0.5 * amb_eq2, (amb_eq2, amb_map)
+
+
+def test_the_table_states_how_sure_the_joint_signals_are_of_each_link(short_lab_run):
+    """``p_link`` is the named link's probability among its rigid group's links: 1 where the
+    joint signals name one link, the named link's share where they leave several; the fitted
+    map moves a contact only to another link of such a group."""
+    from wholearm_tools.classify import tip_probability
+    from wholearm_tools.contacts import detect_contacts
+    from wholearm_tools.pipeline import contact_table, reconstruct
+
+    run, _ = short_lab_run
+    contacts = detect_contacts(run.log, run.robot)
+    n = run.robot.dof
+    prior = np.eye(n)[contacts.link]
+    k = int(np.flatnonzero(contacts.link > 0)[0])
+    prior[k, contacts.link[k]], prior[k, contacts.link[k] - 1] = 0.7, 0.3
+    split = dataclasses.replace(contacts, link_prior=prior)
+    table = contact_table(run.robot, split, tip_probability(run, split, 0.02))
+    expected = np.ones(len(contacts))
+    expected[k] = 0.7
+    np.testing.assert_allclose(table.p_link, expected)
+    back = ContactTable.from_csv(table.to_csv())
+    np.testing.assert_allclose(back.p_link, expected, atol=1e-6)
+
+    fitted = reconstruct(run, B=0.02).table
+    assert np.all((fitted.p_link > 0) & (fitted.p_link <= 1))
+    assert np.all(fitted.p_link[fitted.link_by_map != fitted.link] < 1)

@@ -15,7 +15,9 @@ an inner link), ``tip_radius`` [m], ``a_x … b_z`` (link axis segment), ``link_
 :func:`wholearm_tools.fit.infer.infer`; empty before fitting), ``link_by_map`` (the link the
 fitted map supports where the joint signals could not tell the links of a rigid group apart;
 ``link`` elsewhere, empty before fitting), ``t_settle`` [s] (when the contact settled, where its
-configuration was measured) and ``t_end`` [s] (its release; both empty when not known).
+configuration was measured), ``t_end`` [s] (its release; both empty when not known) and
+``p_link`` (the probability the joint signals give ``link`` among the links of its rigid group:
+1 where they name one link; empty when not known).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ class ContactTable:
     label_map : (M,) str, its label (empty before fitting)
     link_by_map : (M,) int, the link refined by the fitted map (-1 before fitting)
     t_settle, t_end : (M,) float, when the contact settled and was released (NaN: not known)
+    p_link : (M,) float, probability of ``link`` among its rigid group's links (NaN: not known)
     """
 
     t: FloatArray
@@ -71,10 +74,11 @@ class ContactTable:
     link_by_map: NDArray[np.int64] | None = None
     t_settle: FloatArray | None = None
     t_end: FloatArray | None = None
+    p_link: FloatArray | None = None
 
     def __post_init__(self) -> None:
         m = np.asarray(self.t).reshape(-1).shape[0]
-        for name in ("t_settle", "t_end"):
+        for name in ("t_settle", "t_end", "p_link"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.full(m, np.nan))
         if self.link_by_map is None:
@@ -94,7 +98,7 @@ class ContactTable:
                 "link_radius": (float, (m,)), "primitive": (np.int64, (m,)),
                 "residual": (float, (m,)), "p_tip_map": (float, (m,)),
                 "label_map": (np.str_, (m,)), "link_by_map": (np.int64, (m,)),
-                "t_settle": (float, (m,)), "t_end": (float, (m,))}
+                "t_settle": (float, (m,)), "t_end": (float, (m,)), "p_link": (float, (m,))}
         for name, (dtype, shape) in spec.items():
             arr = read_only(getattr(self, name), dtype)
             if arr.size == 0 and 0 in shape:
@@ -119,6 +123,9 @@ class ContactTable:
             raise InputError("p_tip_map must lie in [0, 1]")
         if np.any((self.p_tip < 0) | (self.p_tip > 1)):
             raise InputError("p_tip must lie in [0, 1]")
+        pl = self.p_link[np.isfinite(self.p_link)]
+        if np.any((pl < 0) | (pl > 1)):
+            raise InputError("p_link must lie in [0, 1]")
         if np.any(self.variance <= 0):
             raise InputError("variance must be > 0")
 
@@ -147,7 +154,7 @@ class ContactTable:
         header = ["t", "link", "p_tip", "label", "variance", "used_as",
                   *[f"tip_{c}" for c in axes], "tip_radius", *[f"a_{c}" for c in axes],
                   *[f"b_{c}" for c in axes], "link_radius", "primitive", "residual",
-                  "p_tip_map", "label_map", "link_by_map", "t_settle", "t_end"]
+                  "p_tip_map", "label_map", "link_by_map", "t_settle", "t_end", "p_link"]
         rows = []
         for i in range(len(self)):
             residual = "" if not np.isfinite(self.residual[i]) else f"{self.residual[i]:.9g}"
@@ -162,7 +169,7 @@ class ContactTable:
                 p_map, str(self.label_map[i]),
                 str(int(self.link_by_map[i])) if self.link_by_map[i] >= 0 else "",
                 *["" if not np.isfinite(v) else f"{v:.6f}"
-                  for v in (self.t_settle[i], self.t_end[i])],
+                  for v in (self.t_settle[i], self.t_end[i], self.p_link[i])],
             ]
             rows.append(dict(zip(header, cells, strict=True)))
         return header, rows
@@ -236,6 +243,7 @@ class ContactTable:
             "label_map": np.array([r.get("label_map") or "" for r in rows], dtype="<U9"),
             "link_by_map": optional_int("link_by_map"),
             "t_settle": optional("t_settle"), "t_end": optional("t_end"),
+            "p_link": optional("p_link"),
         }
         try:
             return cls(**fields)
@@ -254,7 +262,7 @@ def table_column_types(dim: int) -> dict[str, str]:
     types.update({f"{p}_{c}": "float64" for p in ("a", "b") for c in axes})
     types.update({"link_radius": "float64", "primitive": "int64", "residual": "float64",
                   "p_tip_map": "float64", "label_map": "string", "link_by_map": "int64",
-                  "t_settle": "float64", "t_end": "float64"})
+                  "t_settle": "float64", "t_end": "float64", "p_link": "float64"})
     return types
 
 

@@ -53,6 +53,15 @@ def test_report_with_truth_opens_with_the_answer(planar_rec, tmp_path):
     assert f"B = {planar_rec.params.B:g} m" in text
     assert "Written by wholearm_tools" in text
     assert "2026-01-01T00:00:00Z" in text
+    t = planar_rec.table
+    group = t.p_link < 1
+    assert f"Links: {int(np.sum(~group))} named by the joint signals alone" in text
+    # a field engineer sees how many links the joint signals left to the swept map and loads
+    split = dataclasses.replace(t, p_link=np.where(np.arange(len(t)) == 0, 0.6, 1.0))
+    data = dataclasses.replace(data, table=split)
+    text = "\n".join(report_pdf.summary_lines(data, info.accuracy, None))
+    assert (f"Links: {len(t) - 1} named by the joint signals alone, 1 left among the links "
+            "of a rigid group (the named link's probability 0.60-0.60;") in text
 
 
 def test_report_without_truth_has_no_accuracy(planar_rec, tmp_path):

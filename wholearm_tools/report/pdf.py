@@ -266,6 +266,18 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     if n and np.all(lab != ""):
         lines.append(f"  refined by the fitted map: tip {int(np.sum(lab == 'tip'))}, link "
                      f"{int(np.sum(lab == 'link'))}, ambiguous {int(np.sum(lab == 'ambiguous'))}")
+    p_link = np.asarray(table.p_link, dtype=float)
+    group = np.isfinite(p_link) & (p_link < 1.0)
+    if n and np.any(np.isfinite(p_link)):
+        k = int(np.sum(group))
+        text = f"Links: {n - k} named by the joint signals alone"
+        if k:
+            moved = int(np.sum(group & (table.link_by_map >= 0)
+                               & (table.link_by_map != table.link)))
+            text += (f", {k} left among the links of a rigid group (the named link's "
+                     f"probability {p_link[group].min():.2f}-{p_link[group].max():.2f}; "
+                     f"the fitted map moved {moved})")
+        lines.append(text)
     lines.append("Parameters: " + "; ".join(_parameter_text(data)))
     tool = meta.get("tool") or {}
     if tool or meta.get("created"):
