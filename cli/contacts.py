@@ -8,7 +8,8 @@ diagnostic columns appended, one row per contact in time order:
 * the table's columns: ``t`` [s], ``link`` (0-based), ``p_tip`` (eq. 2, offline map, or causal
   with ``--causal``), ``label`` (tip / link / ambiguous), ``variance`` (σ² for the fit, m²),
   ``used_as``, ``tip_x, tip_y[, tip_z]``, ``tip_radius``, ``a_*``, ``b_*`` (link axis),
-  ``link_radius``, ``primitive``, ``residual`` (empty before fitting);
+  ``link_radius``, ``primitive``, ``residual`` (empty before fitting), ``p_link`` (the named
+  link's probability among its rigid group's links; 1 where the joints name one link);
 * diagnostics (ignored by the fit): ``contact`` (0-based), ``index`` (log sample),
   ``p_tip_nomap`` (eq. 2 without the map), ``p_tip_swept`` (eq. 1), ``consistent`` (0 when the
   map left no admissible boundary), ``t_end`` [s], ``load`` (the largest torque at the stop on

@@ -36,7 +36,8 @@ def small_table(dim: int = 3) -> ContactTable:
         label=np.array(["tip", "link", "ambiguous"]), variance=np.full(3, 1e-6),
         used_as_tip=np.array([True, False, True]), tip_center=tip,
         tip_radius=np.full(3, 0.01), seg_a=a, seg_b=tip, link_radius=np.full(3, 0.02),
-        primitive=np.array([0, 1, -1]), residual=np.array([1e-4, -2e-4, np.nan]))
+        primitive=np.array([0, 1, -1]), residual=np.array([1e-4, -2e-4, np.nan]),
+        p_link=np.array([1.0, 0.6, 1.0]))
 
 
 def read_overlay(path) -> list[tuple[str, int, dict, dict]]:
@@ -93,6 +94,8 @@ def test_overlay_has_tf_map_and_each_contact_at_its_own_time(map_3d, tmp_path):
     assert [p["y"] for p in line["points"]] == [0.0, 0.2]
     meta = {kv["key"]: kv["value"] for kv in link["metadata"]}
     assert (meta["link"], meta["label"], meta["primitive"]) == ("1", "link", "1")
+    # the joint signals left this contact's link among its rigid group's, at 0.6
+    assert (meta["p_link"], meta["link_by_map"]) == ("0.6", "")
 
 
 def test_overlay_is_deterministic_and_contacts_are_optional(map_3d, tmp_path):

@@ -14,7 +14,8 @@ contact table):
 ``/wholearm/contacts`` (``foxglove.SceneUpdate``)
     one message per contact at the contact's own time: a tip contact as a sphere (the tip or
     joint sphere), a link contact as the link's axis segment, coloured by P_T (blue = link body,
-    red = tip), with time, link, label, P_T and primitive in the metadata.  Entities never
+    red = tip), with time, link (and its probability, and the link the fitted map holds), label,
+    P_T and primitive in the metadata.  Entities never
     expire, so scrubbing the timeline shows the contacts gathered up to that time.
 
 Same inputs → same bytes.
@@ -229,6 +230,9 @@ def contact_updates(table: Any, frame: str, t0_ns: int = 0
         k = int(k)
         colour = p_tip_color(float(table.p_tip[k]))
         meta = {"t": f"{t[k]:.6f}", "link": str(int(table.link[k])),
+                "p_link": _float_text(table.p_link[k]),
+                "link_by_map": str(int(table.link_by_map[k])) if table.link_by_map[k] >= 0
+                else "",
                 "label": str(table.label[k]), "p_tip": _float_text(table.p_tip[k]),
                 "label_map": str(table.label_map[k]),
                 "p_tip_map": _float_text(table.p_tip_map[k]),
