@@ -269,14 +269,15 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     p_link = np.asarray(table.p_link, dtype=float)
     group = np.isfinite(p_link) & (p_link < 1.0)
     if n and np.any(np.isfinite(p_link)):
-        k = int(np.sum(group))
-        text = f"Links: {n - k} named by the joint signals alone"
-        if k:
-            moved = int(np.sum(group & (table.link_by_map >= 0)
-                               & (table.link_by_map != table.link)))
-            text += (f", {k} left among the links of a rigid group (the named link's "
-                     f"probability {p_link[group].min():.2f}-{p_link[group].max():.2f}; "
-                     f"the fitted map moved {moved})")
+        text = f"Links: {int(np.sum(p_link >= 1.0))} named by the joint signals alone"
+        if np.any(group):
+            text += (f", {int(np.sum(group))} left among the links of a rigid group (the "
+                     f"named link's probability {p_link[group].min():.2f}-"
+                     f"{p_link[group].max():.2f}")
+            if np.all(table.link_by_map >= 0):      # fitted: the map may have moved some
+                moved = int(np.sum(group & (table.link_by_map != table.link)))
+                text += f"; the fitted map moved {moved}"
+            text += ")"
         lines.append(text)
     lines.append("Parameters: " + "; ".join(_parameter_text(data)))
     tool = meta.get("tool") or {}
