@@ -106,9 +106,9 @@ def score(run, B: float) -> dict:
     true_link = np.where(ok, truth.contact_link[np.maximum(mi, 0)], -1)
     link_ok = ok & (np.asarray(contacts.link) == true_link)
     prior = np.asarray(contacts.link_prior)
-    # detections whose rigid group left several links: the named link's share (p_link)
+    # detections whose rigid group left several links, with the named link's share
     multi = ok & (np.count_nonzero(prior > 0, axis=1) >= 2)
-    p_link = prior[np.arange(len(contacts)), np.asarray(contacts.link)]
+    p_link = contacts.p_link
     in_group = ok & (prior[np.arange(len(contacts)), np.maximum(true_link, 0)] > 0)
     lab = np.asarray(cls.label)
     decided = link_ok & (lab != "ambiguous")

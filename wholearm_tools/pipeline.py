@@ -91,14 +91,12 @@ def contact_table(robot: RobotModel, contacts: Any, classification: Any) -> Cont
     p_tip = np.asarray(classification.p_tip, dtype=float)
     label = np.asarray(classification.label)
     used_as_tip = np.where(label == "ambiguous", p_tip >= 0.5, label == "tip")
-    # how sure the joint signals are of the link (below 1 only within a rigid group)
-    p_link = np.asarray(contacts.link_prior, dtype=float)[np.arange(m), link]
     return ContactTable(
         t=contacts.t, link=link, p_tip=p_tip, label=label, variance=classification.variance,
         used_as_tip=used_as_tip, tip_center=seg_b, tip_radius=tip_radius, seg_a=seg_a,
         seg_b=seg_b, link_radius=link_radius, primitive=np.full(m, -1),
         residual=np.full(m, np.nan), t_settle=contacts.t_settle, t_end=contacts.t_end,
-        p_link=p_link,
+        p_link=contacts.p_link,
     )
 
 

@@ -224,6 +224,12 @@ class Contacts:
     def n_joints(self) -> int:
         return int(self.velocity_threshold.shape[0])
 
+    @property
+    def p_link(self) -> FloatArray:
+        """``(M,)`` probability of each contact's named link (its ``link_prior`` entry): 1
+        where the joint signals name one link, its share where a rigid group left several."""
+        return self.link_prior[np.arange(len(self)), self.link]
+
     def select(self, mask: Any) -> Contacts:
         """A new record with the contacts where ``mask`` (bool or index array) selects."""
         sel = np.arange(len(self))[mask]
