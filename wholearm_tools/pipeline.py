@@ -131,21 +131,50 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
     """Geometric resolution of a contact from the log's encoder noise [m].
 
     Per joint, the white-noise scale of the measured positions is the MAD of their second
-    differences (smooth motion cancels at the log rate; quantisation counts as noise) divided
-    by ``sqrt(6)``; a point at the robot's reach moves by ``reach * sqrt(sum sigma_j^2)``.
-    Floored at :data:`DEFAULT_NOISE_FLOOR` / 10.
-    """
+    differences divided by ``sqrt(6)``; a point at the robot's reach moves by
+    ``reach * sqrt(sum sigma_j^2)``.  Floored at :data:`DEFAULT_NOISE_FLOOR` / 10.
+
+    Smooth motion cancels in second differences only where the log rate is high against the
+    arm's accelerations: at the 50 Hz many rigs log at, a controller's transients reach them
+    and the scale over the whole log is motion, not noise.  So the scale is also taken over
+    the joint's samples at rest (both first differences within ``3 sqrt 2`` scales, down to a
+    fixed point) and the smaller kept: the contacts are read at rest.  A quantised signal has
+    a MAD of whole counts: at rest a fine encoder reads a constant, so the figure at rest is
+    floored at the whole log's (a single count where motion dithers it) and is a check on it,
+    never less."""
     q = np.asarray(q, dtype=float)
     if q.ndim != 2 or len(q) < 5:
         return DEFAULT_NOISE_FLOOR
     d2 = np.diff(q, n=2, axis=0)
-    sig = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6.0)
+
+    def scale(x: NDArray[np.float64]) -> float:
+        return float(1.4826 * np.median(np.abs(x - np.median(x))) / np.sqrt(6.0))
+
+    sig = np.array([scale(c) for c in d2.T])
     # a quantised signal at rest has zero MAD: count one quantum step as the noise then
     steps = np.abs(np.diff(q, axis=0))
     quantum = np.array([np.min(c[c > 0]) if np.any(c > 0) else 0.0 for c in steps.T])
     sig = np.maximum(sig, quantum / np.sqrt(12.0))
+    count = 1.4826 * quantum / np.sqrt(6.0)   # the MAD scale of one-count second differences
+    for j in range(q.shape[1]):
+        s = sig[j]
+        for _ in range(_REST_ROUNDS):
+            still = steps[:, j] <= 3.0 * np.sqrt(2.0) * s
+            rest = still[1:] & still[:-1]
+            if np.count_nonzero(rest) < _REST_MIN:
+                break
+            nxt = min(sig[j], max(scale(d2[rest, j]), count[j], quantum[j] / np.sqrt(12.0)))
+            if not nxt < 0.95 * s:   # settled (within the estimate's own precision)
+                break
+            s = nxt
+        sig[j] = s
     return float(max(float(robot.reach) * float(np.sqrt(np.sum(sig * sig))),
                      DEFAULT_NOISE_FLOOR / 10))
+
+
+#: fixed-point rounds of a joint's noise scale at rest, and the fewest samples at rest it needs
+_REST_ROUNDS = 10
+_REST_MIN = 50
 
 
 def duplicate_groups(table: ContactTable, tol: float) -> NDArray[np.int64]:
