@@ -327,37 +327,3 @@ def test_the_table_states_how_sure_the_joint_signals_are_of_each_link(short_lab_
     assert np.all((fitted.p_link > 0) & (fitted.p_link <= 1))
     assert np.all(fitted.p_link[fitted.link_by_map != fitted.link] < 1)
 
-
-def _encoder(q: np.ndarray, rng: np.random.Generator, noise: float = 1e-5,
-             counts: int = 2**17) -> np.ndarray:
-    quantum = 2 * np.pi / counts
-    return np.round((q + rng.normal(0.0, noise, q.shape)) / quantum) * quantum
-
-
-def test_the_position_noise_floor_does_not_depend_on_the_log_rate():
-    """The contacts' noise floor comes from the encoders' noise, not from the log rate.  A
-    two-joint arm moves under a lightly damped controller (transients of a few hertz) and
-    rests between moves; at 50 Hz those transients reach the second differences (the
-    whole-log scale is several times the encoders'), and the floor stays the one the same
-    motion logged at 500 Hz gives."""
-    from wholearm_tools.pipeline import position_noise_floor
-    from wholearm_tools.sim.scenarios import load_scenario
-
-    robot = load_scenario("lab_circle").robot
-    floors, whole = {}, {}
-    for rate in (500.0, 50.0):
-        rng = np.random.default_rng(3)
-        t = np.arange(0.0, 60.0, 1.0 / rate)
-        q = np.zeros((len(t), 2))
-        for j in range(2):
-            for start in np.arange(0.0, 60.0, 1.5):   # a step every 1.5 s, settled in 1 s
-                tau = np.clip(t - start, 0.0, None)
-                q[:, j] += np.where(t >= start, rng.uniform(-0.5, 0.5) * (
-                    1 - np.exp(-6 * tau) * (np.cos(25 * tau) + 0.24 * np.sin(25 * tau))), 0.0)
-        log = _encoder(q, rng)
-        d2 = np.diff(log, n=2, axis=0)
-        sig = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
-        whole[rate] = robot.reach * np.sqrt(np.sum(sig ** 2))
-        floors[rate] = position_noise_floor(robot, log)
-    assert whole[50.0] > 4 * floors[500.0]      # the motion reaches the 50 Hz differences
-    assert floors[50.0] == pytest.approx(floors[500.0], rel=0.2)
