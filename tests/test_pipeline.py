@@ -326,4 +326,3 @@ def test_the_table_states_how_sure_the_joint_signals_are_of_each_link(short_lab_
     fitted = reconstruct(run, B=0.02).table
     assert np.all((fitted.p_link > 0) & (fitted.p_link <= 1))
     assert np.all(fitted.p_link[fitted.link_by_map != fitted.link] < 1)
-

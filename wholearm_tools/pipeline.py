@@ -127,6 +127,11 @@ def free_space_hints(robot: RobotModel, q: NDArray[np.float64], count: int) -> N
 DEFAULT_NOISE_FLOOR = 1e-5
 
 
+#: fixed-point rounds of a joint's noise scale at rest, and the fewest samples at rest it needs
+_REST_ROUNDS = 10
+_REST_MIN = 50
+
+
 def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
     """Geometric resolution of a contact from the log's encoder noise [m].
 
@@ -138,10 +143,10 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
     arm's accelerations: at the 50 Hz many rigs log at, a controller's transients reach them
     and the scale over the whole log is motion, not noise.  So the scale is also taken over
     the joint's samples at rest (both first differences within ``3 sqrt 2`` scales, down to a
-    fixed point) and the smaller kept: the contacts are read at rest.  A quantised signal has
-    a MAD of whole counts: at rest a fine encoder reads a constant, so the figure at rest is
-    floored at the whole log's (a single count where motion dithers it) and is a check on it,
-    never less."""
+    fixed point) and the smaller kept: the contacts are read at rest.  A quantised encoder
+    held still reads a constant (a MAD of zero) where motion dithers its counts, so the figure
+    at rest is floored at one count's MAD scale: it takes out the motion, not the quantisation
+    the whole log shows."""
     q = np.asarray(q, dtype=float)
     if q.ndim != 2 or len(q) < 5:
         return DEFAULT_NOISE_FLOOR
@@ -170,11 +175,6 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
         sig[j] = s
     return float(max(float(robot.reach) * float(np.sqrt(np.sum(sig * sig))),
                      DEFAULT_NOISE_FLOOR / 10))
-
-
-#: fixed-point rounds of a joint's noise scale at rest, and the fewest samples at rest it needs
-_REST_ROUNDS = 10
-_REST_MIN = 50
 
 
 def duplicate_groups(table: ContactTable, tol: float) -> NDArray[np.int64]:
