@@ -13,7 +13,7 @@ Controller
 ----------
 A joint PD law on *measured* positions (the encoder model of the kinematic engine, read at every
 physics step) with an encoder-derived velocity estimate (backward difference over
-``velocity_window`` log periods)::
+``velocity_time``, 10 ms: the drive's loop does not slow down when the log does)::
 
     tau = clip(K (q_ref - q_m) + D (qd_ref - qd_m) + g(q_m), -effort, effort)
 
@@ -99,6 +99,8 @@ class Physics:
     contact_timeconst : soft-contact time constant [s] (stiffness; MuJoCo ``solref[0]``)
     contact_dampratio : soft-contact damping ratio (< 1: contacts rebound)
     rate : smallest physics rate [Hz]; the step is the log period divided by a whole number
+    velocity_time : the drive's velocity estimate, a backward difference of its encoder reads
+        over this time [s]: the control loop runs at the physics rate whatever the log rate
     density : mass density of the links [kg/m³] (thin-walled aluminium tube with its drives)
     armature : reflected rotor inertia per N m of effort limit [kg m² / (N m)]
     lead : largest lead of the reference over the measured position, as a fraction of the
@@ -115,6 +117,7 @@ class Physics:
     contact_timeconst: float = 0.005
     contact_dampratio: float = 0.7
     rate: float = 1000.0
+    velocity_time: float = 0.01
     density: float = 1000.0
     armature: float = 0.002
     lead: float = 1.0
@@ -124,8 +127,8 @@ class Physics:
     max_deviation: float = 3e-4
 
     def __post_init__(self) -> None:
-        positive = ("contact_timeconst", "contact_dampratio", "rate", "density", "lead",
-                    "settle_time", "rest_speed", "release_time", "max_deviation")
+        positive = ("contact_timeconst", "contact_dampratio", "rate", "velocity_time", "density",
+                    "lead", "settle_time", "rest_speed", "release_time", "max_deviation")
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -242,7 +245,7 @@ class _Rig:
         self.rng = rng
         self._noise = np.zeros((0, n))
         self._noise_i = 0
-        self.window = sensors.velocity_window * self.substeps
+        self.window = max(1, round(physics.velocity_time / self.dt))
         self._per_count = 1.0 / self.quantum
         self._per_window = 1.0 / (self.window * self.dt)
         self._hist_len = self.window + 1
