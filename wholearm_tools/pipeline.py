@@ -160,7 +160,8 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
     steps = np.abs(np.diff(q, axis=0))
     quantum = np.array([np.min(c[c > 0]) if np.any(c > 0) else 0.0 for c in steps.T])
     sig = np.maximum(sig, quantum / np.sqrt(12.0))
-    count = 1.4826 * quantum / np.sqrt(6.0)   # the MAD scale of one-count second differences
+    # the MAD scale of one-count second differences (above quantum / sqrt 12)
+    count = 1.4826 * quantum / np.sqrt(6.0)
     for j in range(q.shape[1]):
         s = sig[j]
         for _ in range(_REST_ROUNDS):
@@ -168,7 +169,7 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
             rest = still[1:] & still[:-1]
             if np.count_nonzero(rest) < _REST_MIN:
                 break
-            nxt = min(sig[j], max(scale(d2[rest, j]), count[j], quantum[j] / np.sqrt(12.0)))
+            nxt = min(sig[j], max(scale(d2[rest, j]), count[j]))
             if not nxt < 0.95 * s:   # settled (within the estimate's own precision)
                 break
             s = nxt
