@@ -29,11 +29,13 @@ detections whose rigid group left several links: a calibrated share is right tha
 The last rows give each column's total over the runs and its spread (min-max over seeds).
 Physics parameters can be swept (``--friction``, ``--joint-friction`` as a fraction of the
 effort limit, ``--gravity``) to check that the figures hold beyond the defaults, and the log
-rate lowered (``--rate``, Hz) to the 50-100 Hz real rigs often log at.
+rate lowered (``--rate``, Hz) to the 50-100 Hz real rigs often log at, on a clock that
+ticks irregularly and loses samples as theirs do (``--log-jitter``, ``--log-drop``).
 
 Run:  .venv/bin/python benchmarks/bench_events.py --engine physics --seeds 0-9
       [--scenarios paper_spatial,well_junction] [--friction 1.0] [--joint-friction 0.05]
-      [--gravity] [--rate 50] [--duration 60] [--cache DIR] [--list]
+      [--gravity] [--rate 50] [--log-jitter 0.05 --log-drop 0.0065] [--duration 60]
+      [--cache DIR] [--list]
 """
 
 from __future__ import annotations
@@ -76,6 +78,9 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
             changes["joint_friction"] = args.joint_friction
         if args.gravity:
             changes["gravity"] = True
+        for key in ("log_jitter", "log_drop"):
+            if getattr(args, key) is not None:
+                changes[key] = getattr(args, key)
         physics = dataclasses.replace(physics, **changes)
         tag += "_" + "_".join(f"{k}{v}" for k, v in sorted(changes.items()))
     path = Path(args.cache) / f"{tag}.mcap" if args.cache else None
@@ -155,6 +160,10 @@ def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
     ap.add_argument("--friction", type=float, default=None)
     ap.add_argument("--joint-friction", type=float, default=None)
     ap.add_argument("--gravity", action="store_true")
+    ap.add_argument("--log-jitter", type=float, default=None,
+                    help="[physics] relative std of each log interval (a rig's clock; ~0.05)")
+    ap.add_argument("--log-drop", type=float, default=None,
+                    help="[physics] share of log samples lost (a rig's logger; ~0.007)")
     ap.add_argument("--cache", default=None, help="folder to keep simulated runs in")
 
 

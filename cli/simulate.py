@@ -34,6 +34,8 @@ _PHYSICS_OPTIONS = {
     "contact_timeconst": "contact_timeconst",
     "contact_dampratio": "contact_dampratio",
     "physics_rate": "rate",
+    "log_jitter": "log_jitter",
+    "log_drop": "log_drop",
 }
 
 
@@ -92,6 +94,13 @@ def _scenario_source(scenario: str) -> None:
                    "the scenario's, 0.7).")
 @click.option("--physics-rate", type=click.FloatRange(min=1.0), default=None,
               help="[physics] Smallest physics rate in Hz (default: the scenario's, 1000).")
+@click.option("--log-jitter", type=click.FloatRange(min=0.0, max=0.5), default=None,
+              help="[physics] A rig's log clock: relative standard deviation of each interval "
+                   "between samples, stamped when taken (default: the scenario's, 0; real "
+                   "rigs about 0.05).")
+@click.option("--log-drop", type=click.FloatRange(min=0.0, max=0.5), default=None,
+              help="[physics] Share of log samples lost (default: the scenario's, 0; real "
+                   "rigs about 0.007).")
 @click.option("--mjcf", "mjcf_file", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="[physics] Also write the MuJoCo scene (MJCF) to this file.")
 @json_option

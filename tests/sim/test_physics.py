@@ -134,6 +134,35 @@ def test_a_run_logged_at_50_hz_is_the_500_hz_run_decimated() -> None:
     np.testing.assert_array_equal(runs[500.0].truth.contact_t, runs[50.0].truth.contact_t)
 
 
+def test_a_run_logged_by_a_rigs_clock_is_the_same_run_sampled_when_stamped() -> None:
+    """A rig's logger ticks irregularly and loses samples: at 50 Hz with intervals varying by
+    10 % and 5 % of the samples lost, every logged sample is the 1 kHz run's sample at its own
+    stamp (the logging does not touch the physics), the intervals vary as asked, and the log
+    velocity is the backward difference over the samples' own times."""
+    robot = two_link()
+    clock = Physics(log_jitter=0.1, log_drop=0.05)
+    fine = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0), rate=1000.0,
+                        duration=6.0).run.log
+    res = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0), rate=50.0,
+                       duration=6.0, physics=clock)
+    log = res.run.log
+    at = np.rint(log.t * 1000.0).astype(int)
+    np.testing.assert_allclose(log.t * 1000.0, at, atol=1e-6)  # on the physics steps
+    np.testing.assert_array_equal(fine.q[at], log.q)
+    np.testing.assert_array_equal(fine.tau_cmd[at], log.tau_cmd)
+    steps = np.diff(log.t)
+    single = steps[steps < 0.03]  # intervals with no sample lost between
+    assert 0.07 < single.std() / 0.02 < 0.13
+    assert 0.02 < 1.0 - len(log.t) / 300.0 < 0.09
+    assert np.all(steps > 0)
+    w = 5
+    span = (log.t[w:] - log.t[:-w])[:, None]
+    np.testing.assert_allclose(log.qd[w:], (log.q[w:] - log.q[:-w]) / span)
+    plain = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0), rate=50.0,
+                         duration=6.0)
+    np.testing.assert_array_equal(res.truth.contact_t, plain.truth.contact_t)
+
+
 def test_friction_makes_the_tip_slide_less() -> None:
     robot = two_link()
     slides = []

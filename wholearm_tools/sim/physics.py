@@ -77,6 +77,7 @@ from wholearm_tools.sim.simulator import (
 from wholearm_tools.sim.strategies import Strategy, make_strategy
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 ENGINES = ("kinematic", "physics")
 """Simulation engines ``wholearm simulate --engine`` accepts."""
@@ -109,6 +110,12 @@ class Physics:
     rest_speed : joint speed below which a joint is at rest, as a fraction of its cruise speed
     release_time : separation that ends a contact event [s] (shorter ones are rebounds)
     max_deviation : largest deviation of a tiled concave wall from the ideal surface [m]
+    log_jitter : a rig's logger does not tick exactly: each interval between log samples is the
+        log period times ``1 + e``, ``e`` Gaussian with this standard deviation, and a sample
+        is taken at the physics step nearest its time and stamped with it (the state stamps
+        of a real 50 Hz rig vary by about 5 % of the period)
+    log_drop : share of log samples lost (not written), each independently (a real rig's
+        logger loses about 0.7 %)
     """
 
     friction: float = 0.4
@@ -125,6 +132,8 @@ class Physics:
     rest_speed: float = 0.02
     release_time: float = 0.1
     max_deviation: float = 3e-4
+    log_jitter: float = 0.0
+    log_drop: float = 0.0
 
     def __post_init__(self) -> None:
         positive = ("contact_timeconst", "contact_dampratio", "rate", "velocity_time", "density",
@@ -140,6 +149,12 @@ class Physics:
         if self.joint_friction >= 1:
             raise InputError(f"physics joint_friction is a fraction of the effort limit (< 1), "
                              f"got {self.joint_friction}")
+        if not (np.isfinite(self.log_jitter) and 0 <= self.log_jitter <= 0.5):
+            raise InputError(f"physics log_jitter is a fraction of the log period in [0, 0.5], "
+                             f"got {self.log_jitter}")
+        if not (np.isfinite(self.log_drop) and 0 <= self.log_drop <= 0.5):
+            raise InputError(f"physics log_drop is a share of the samples in [0, 0.5], "
+                             f"got {self.log_drop}")
 
     def replace(self, **changes: Any) -> Physics:
         """A copy with ``changes`` (None values are ignored)."""
@@ -192,7 +207,8 @@ class _Rig:
 
     def __init__(self, robot: RobotModel, obstacles: Sequence[ObstacleLike], physics: Physics,
                  controller: Controller, sensors: Sensors, rate: float, n_samples: int,
-                 home: FloatArray, rng: np.random.Generator) -> None:
+                 home: FloatArray, rng: np.random.Generator,
+                 clock_rng: np.random.Generator) -> None:
         import mujoco
 
         from wholearm_tools.sim.mjcf import SceneOptions, build_scene
@@ -250,7 +266,10 @@ class _Rig:
         self._per_window = 1.0 / (self.window * self.dt)
         self._hist_len = self.window + 1
         self._neg_effort = -self.effort
-        self._n_samples = n_samples
+        self.log_steps = _log_schedule(n_samples, self.substeps, physics, clock_rng)
+        self._steps = self.log_steps.tolist()
+        n_samples = len(self._steps)
+        self._next_log = self._steps[0]
         self._mj_step = mujoco.mj_step
         self._hist = np.repeat(self._measure()[None], self.window + 1, axis=0)
         self._hist_i = 0
@@ -301,11 +320,12 @@ class _Rig:
             tau += self._gravity_torque(q_m)
         tau = np.minimum(np.maximum(tau, self._neg_effort), self.effort)
         self.q_ref = q_ref
-        if self.step_i % self.substeps == 0 and self.log.k < self._n_samples:
+        if self.step_i == self._next_log:
             lg, k = self.log, self.log.k
             lg.q_meas[k], lg.q_ref[k], lg.tau[k] = q_m, q_ref, tau
             lg.q_true[k], lg.qd_true[k] = self.data.qpos, self.data.qvel
             lg.k += 1
+            self._next_log = self._steps[lg.k] if lg.k < len(self._steps) else -1
         self.data.ctrl[:] = tau
         self._mj_step(self.model, self.data)
         self.step_i += 1
@@ -480,6 +500,7 @@ def simulate_physics(
     collider = Collider(robot, obstacles)
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     strat_seq, noise_seq = seq.spawn(2)
+    clock_seq = seq.spawn(1)[0]
     grid = SweptGrid(robot)
     if isinstance(strategy, Strategy):
         strat = strategy
@@ -499,7 +520,7 @@ def simulate_physics(
 
     N = int(np.floor(duration * rate + 1e-9)) + 1
     rig = _Rig(robot, obstacles, physics, controller, sensors, rate, N, q_home,
-               np.random.default_rng(noise_seq))
+               np.random.default_rng(noise_seq), np.random.default_rng(clock_seq))
     sup = _Supervisor(rig, collider, controller, physics)
     sweep_step = grid.cell / 2
     max_lever = float(collider.lever.max())
@@ -638,8 +659,7 @@ def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
             progress: ProgressCallback | None, wall0: float) -> SimResult:
     n = robot.dof
     lg = rig.log
-    N = lg.q_meas.shape[0]
-    t_log_end = (N - 1) / rate
+    t_log_end = float(rig.log_steps[-1] / rig.substeps) / rate
     events = sorted((ev for ev in rig.events if ev.t_start <= t_log_end),
                     key=lambda ev: (ev.t_start, ev.link, ev.surface))
     order = {id(ev): i for i, ev in enumerate(events)}
@@ -672,7 +692,7 @@ def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
               "physics": asdict(physics), "stiffness": K.tolist(), "damping": D.tolist(),
               "mujoco": rig.mujoco.__version__, **(meta or {})},
     )
-    log = _joint_log(robot, lg, rate, sensors)
+    log = _joint_log(robot, lg, rig.log_steps / rig.substeps, rate, sensors)
     run = Run(robot=robot, log=log, truth=truth,
               source=str((meta or {}).get("scenario", "<simulated>")))
     if progress is not None:
@@ -693,6 +713,25 @@ def _result(robot: RobotModel, collider: Collider, rig: _Rig, strat: Strategy,
         wall_time=time.perf_counter() - wall0, clearance_evals=collider.n_evals, stats=stats)
 
 
+def _log_schedule(n_samples: int, substeps: int, physics: Physics,
+                  rng: np.random.Generator) -> IntArray:
+    """Physics step of each log sample over the run's ``n_samples`` log periods: every
+    ``substeps`` steps, or by a rig's clock (``physics.log_jitter``, ``log_drop``): intervals
+    of ``substeps * (1 + e)`` steps accumulated (the clock drifts as it does on a rig, no
+    sample is pulled back to a grid), each sample at the nearest step, then samples lost at
+    random (never the first)."""
+    last = (n_samples - 1) * substeps
+    if physics.log_jitter == 0 and physics.log_drop == 0:
+        return np.arange(n_samples, dtype=np.int64) * substeps
+    m = 2 * n_samples + 16
+    steps = substeps * np.maximum(1.0 + physics.log_jitter * rng.standard_normal(m), 0.1)
+    at = np.unique(np.rint(np.concatenate([[0.0], np.cumsum(steps)])).astype(np.int64))
+    at = at[at <= last]
+    keep = rng.random(at.shape[0]) >= physics.log_drop
+    keep[0] = True
+    return at[keep]
+
+
 def _surfaces_with_deviation(collider: Collider, deviation: dict[int, float]
                              ) -> tuple[dict[str, Any], ...]:
     """Ground-truth surface records, each with the measured deviation of the simulated surface
@@ -701,9 +740,12 @@ def _surfaces_with_deviation(collider: Collider, deviation: dict[int, float]
                  for s in surface_dicts(collider))
 
 
-def _joint_log(robot: RobotModel, lg: _Log, rate: float, sensors: Sensors) -> JointLog:
-    """The logged topics: encoder positions, encoder-derived velocity (backward difference over
-    ``velocity_window`` samples, as the kinematic engine), reference and clipped torque."""
+def _joint_log(robot: RobotModel, lg: _Log, periods: FloatArray, rate: float,
+               sensors: Sensors) -> JointLog:
+    """The logged topics at ``periods`` (each sample's time in log periods): encoder
+    positions, encoder-derived velocity (backward difference over ``velocity_window``
+    samples, as the kinematic engine, on the samples' own times), reference and clipped
+    torque."""
     q = lg.q_meas
     N = q.shape[0]
     w = sensors.velocity_window
@@ -711,7 +753,7 @@ def _joint_log(robot: RobotModel, lg: _Log, rate: float, sensors: Sensors) -> Jo
     if N > 1:
         ks = np.arange(1, N)
         back = np.maximum(ks - w, 0)
-        qd[1:] = (q[ks] - q[back]) * rate / (ks - back)[:, None]
-    t = np.arange(N) * (1.0 / rate)
+        qd[1:] = (q[ks] - q[back]) * rate / (periods[ks] - periods[back])[:, None]
+    t = periods * (1.0 / rate)
     return JointLog(joint_names=robot.joint_names, t=t, q=q, qd=qd, tau_cmd=lg.tau,
                     q_cmd=lg.q_ref, t0_ns=SIM_T0_NS)
