@@ -78,7 +78,7 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
             changes["joint_friction"] = args.joint_friction
         if args.gravity:
             changes["gravity"] = True
-        for key in ("log_jitter", "log_drop"):
+        for key in ("joint_compliance", "log_jitter", "log_drop"):
             if getattr(args, key) is not None:
                 changes[key] = getattr(args, key)
         physics = dataclasses.replace(physics, **changes)
@@ -160,6 +160,8 @@ def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
     ap.add_argument("--friction", type=float, default=None)
     ap.add_argument("--joint-friction", type=float, default=None)
     ap.add_argument("--gravity", action="store_true")
+    ap.add_argument("--joint-compliance", type=float, default=None,
+                    help="[physics] transmission deflection at the effort limit, rad (~0.001)")
     ap.add_argument("--log-jitter", type=float, default=None,
                     help="[physics] relative std of each log interval (a rig's clock; ~0.05)")
     ap.add_argument("--log-drop", type=float, default=None,

@@ -34,6 +34,7 @@ _PHYSICS_OPTIONS = {
     "contact_timeconst": "contact_timeconst",
     "contact_dampratio": "contact_dampratio",
     "physics_rate": "rate",
+    "joint_compliance": "joint_compliance",
     "log_jitter": "log_jitter",
     "log_drop": "log_drop",
 }
@@ -94,6 +95,10 @@ def _scenario_source(scenario: str) -> None:
                    "the scenario's, 0.7).")
 @click.option("--physics-rate", type=click.FloatRange(min=1.0), default=None,
               help="[physics] Smallest physics rate in Hz (default: the scenario's, 1000).")
+@click.option("--joint-compliance", type=click.FloatRange(min=0.0, max=0.1), default=None,
+              help="[physics] Deflection of each joint's transmission at its effort limit in "
+                   "rad, read by motor-side encoders (default: the scenario's, 0; harmonic "
+                   "drives 0.0005-0.002).")
 @click.option("--log-jitter", type=click.FloatRange(min=0.0, max=0.5), default=None,
               help="[physics] A rig's log clock: relative standard deviation of each interval "
                    "between samples, stamped when taken (default: the scenario's, 0; real "

@@ -163,6 +163,26 @@ def test_a_run_logged_by_a_rigs_clock_is_the_same_run_sampled_when_stamped() -> 
     np.testing.assert_array_equal(res.truth.contact_t, plain.truth.contact_t)
 
 
+def test_motor_side_encoders_read_the_transmissions_deflection() -> None:
+    """With a compliant transmission the encoders read the link's position plus the
+    deflection under the drive's torque: pressing a wall, the logged position of the blocked
+    shoulder leads the link's by compliance x torque / effort (1 mrad here, a hundred times
+    the encoder's noise); with a rigid one they agree to the noise."""
+    robot = two_link()
+    effort = robot.effort_limits[0]
+    for compliance in (0.0, 0.002):
+        res = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0),
+                           physics=Physics(joint_compliance=compliance))
+        log = res.run.log
+        pressing = np.flatnonzero(np.abs(log.tau_cmd[:-1, 0]) > 0.5 * effort) + 1
+        assert pressing.size > 50
+        seen = log.q[pressing, 0] - res.q_true[pressing, 0]
+        deflection = compliance * log.tau_cmd[pressing - 1, 0] / effort
+        np.testing.assert_allclose(seen, deflection, atol=1e-4)
+        if compliance:
+            assert np.median(np.abs(deflection)) > 5e-4
+
+
 def test_friction_makes_the_tip_slide_less() -> None:
     robot = two_link()
     slides = []

@@ -110,6 +110,10 @@ class Physics:
     rest_speed : joint speed below which a joint is at rest, as a fraction of its cruise speed
     release_time : separation that ends a contact event [s] (shorter ones are rebounds)
     max_deviation : largest deviation of a tiled concave wall from the ideal surface [m]
+    joint_compliance : deflection of each joint's transmission at its effort limit [rad]: the
+        encoders sit on the motor side and read the link's position plus the deflection under
+        the torque the drive applies (quasi-static: the torque last commanded); harmonic
+        drives deflect 0.5-2 mrad at their rated torque, 0 is a rigid transmission
     log_jitter : a rig's logger does not tick exactly: each interval between log samples is the
         log period times ``1 + e``, ``e`` Gaussian with this standard deviation, and a sample
         is taken at the physics step nearest its time and stamped with it (the state stamps
@@ -132,6 +136,7 @@ class Physics:
     rest_speed: float = 0.02
     release_time: float = 0.1
     max_deviation: float = 3e-4
+    joint_compliance: float = 0.0
     log_jitter: float = 0.0
     log_drop: float = 0.0
 
@@ -142,7 +147,7 @@ class Physics:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise InputError(f"physics {name} must be positive, got {value}")
-        for name in ("friction", "joint_friction", "armature"):
+        for name in ("friction", "joint_friction", "armature", "joint_compliance"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise InputError(f"physics {name} must be >= 0, got {value}")
@@ -263,6 +268,9 @@ class _Rig:
         self._noise_i = 0
         self.window = max(1, round(physics.velocity_time / self.dt))
         self._per_count = 1.0 / self.quantum
+        self._compliance = (physics.joint_compliance / self.effort
+                            if physics.joint_compliance > 0 else None)
+        self._tau = np.zeros(n)  # torque the drives apply (the transmission's deflection)
         self._per_window = 1.0 / (self.window * self.dt)
         self._hist_len = self.window + 1
         self._neg_effort = -self.effort
@@ -291,11 +299,15 @@ class _Rig:
         return self.step_i * self.dt
 
     def _measure(self) -> FloatArray:
-        """Encoder reading of the true joint positions: Gaussian noise, then quantisation."""
+        """Encoder reading of the joint positions (on the motor side: the link's plus the
+        transmission's deflection under the drive's torque): Gaussian noise, then
+        quantisation."""
         if self._noise_i >= self._noise.shape[0]:
             self._noise = self.rng.normal(0.0, self.noise_sd, size=(4096, self.n))
             self._noise_i = 0
         noisy = self.data.qpos + self._noise[self._noise_i]
+        if self._compliance is not None:
+            noisy = noisy + self._compliance * self._tau
         self._noise_i += 1
         return np.round(noisy * self._per_count) * self.quantum
 
@@ -327,6 +339,7 @@ class _Rig:
             lg.k += 1
             self._next_log = self._steps[lg.k] if lg.k < len(self._steps) else -1
         self.data.ctrl[:] = tau
+        self._tau = tau
         self._mj_step(self.model, self.data)
         self.step_i += 1
         self._contacts()
