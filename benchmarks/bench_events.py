@@ -30,12 +30,14 @@ The last rows give each column's total over the runs and its spread (min-max ove
 Physics parameters can be swept (``--friction``, ``--joint-friction`` as a fraction of the
 effort limit, ``--gravity``) to check that the figures hold beyond the defaults, and the log
 rate lowered (``--rate``, Hz) to the 50-100 Hz real rigs often log at, on a clock that
-ticks irregularly and loses samples as theirs do (``--log-jitter``, ``--log-drop``).
+ticks irregularly and loses samples as theirs do (``--log-jitter``, ``--log-drop``), and
+the joints read through compliant transmissions (``--joint-compliance``, rad at the effort
+limit).
 
 Run:  .venv/bin/python benchmarks/bench_events.py --engine physics --seeds 0-9
       [--scenarios paper_spatial,well_junction] [--friction 1.0] [--joint-friction 0.05]
-      [--gravity] [--rate 50] [--log-jitter 0.05 --log-drop 0.0065] [--duration 60]
-      [--cache DIR] [--list]
+      [--gravity] [--rate 50] [--log-jitter 0.05 --log-drop 0.0065] [--joint-compliance 0.001]
+      [--duration 60] [--cache DIR] [--list]
 """
 
 from __future__ import annotations
