@@ -731,8 +731,8 @@ def _log_schedule(n_samples: int, substeps: int, physics: Physics,
     """Physics step of each log sample over the run's ``n_samples`` log periods: every
     ``substeps`` steps, or by a rig's clock (``physics.log_jitter``, ``log_drop``): intervals
     of ``substeps * (1 + e)`` steps accumulated (the clock drifts as it does on a rig, no
-    sample is pulled back to a grid), each sample at the nearest step, then samples lost at
-    random (never the first)."""
+    sample is pulled back to a grid), each sample at the nearest step (two falling on one step
+    are one sample), then samples lost at random (never the first)."""
     last = (n_samples - 1) * substeps
     if physics.log_jitter == 0 and physics.log_drop == 0:
         return np.arange(n_samples, dtype=np.int64) * substeps
