@@ -27,6 +27,9 @@ def test_a_swallowed_ctrl_c_still_stops_the_output_from_being_put_in_place(tmp_p
     monkeypatch.setattr(_interrupt, "_installed", False)    # restored after the test
     monkeypatch.setattr(_interrupt, "_pressed", False)
     try:
+        # Python's own Ctrl-C handling, whatever the test runner inherited (a suite started as
+        # a background job ignores SIGINT, and install() then rightly leaves it ignored)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         _interrupt.install()
         assert not _interrupt.pressed()
         _press_and_swallow()
