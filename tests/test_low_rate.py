@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wholearm_tools.contacts.events import second_difference_scale
 from wholearm_tools.pipeline import position_noise_floor
 from wholearm_tools.sim.scenarios import load_scenario
 
@@ -27,18 +28,12 @@ def _log(rate: float, seed: int = 3) -> np.ndarray:
     return np.round((q + rng.normal(0.0, NOISE, q.shape)) / QUANTUM) * QUANTUM
 
 
-def _whole_log_scale(x: np.ndarray) -> np.ndarray:
-    d2 = np.diff(x, n=2, axis=0)
-    return 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6)
-
-
 def test_the_position_noise_floor_does_not_depend_on_the_log_rate():
     """At 50 Hz the controller's transients reach the positions' second differences (the
     whole-log scale is several times the encoders'); the contacts' noise floor stays the one
     the same motion logged at 500 Hz gives."""
     robot = load_scenario("lab_circle").robot
     floors = {rate: position_noise_floor(robot, _log(rate)) for rate in (500.0, 50.0)}
-    whole = robot.reach * np.sqrt(np.sum(_whole_log_scale(_log(50.0)) ** 2))
+    whole = robot.reach * np.sqrt(np.sum(second_difference_scale(_log(50.0)) ** 2))
     assert whole > 4 * floors[500.0]
     assert floors[50.0] == pytest.approx(floors[500.0], rel=0.2)
-

@@ -154,12 +154,11 @@ class Physics:
         if self.joint_friction >= 1:
             raise InputError(f"physics joint_friction is a fraction of the effort limit (< 1), "
                              f"got {self.joint_friction}")
-        if not (np.isfinite(self.log_jitter) and 0 <= self.log_jitter <= 0.5):
-            raise InputError(f"physics log_jitter is a fraction of the log period in [0, 0.5], "
-                             f"got {self.log_jitter}")
-        if not (np.isfinite(self.log_drop) and 0 <= self.log_drop <= 0.5):
-            raise InputError(f"physics log_drop is a share of the samples in [0, 0.5], "
-                             f"got {self.log_drop}")
+        for name, what in (("log_jitter", "a fraction of the log period"),
+                           ("log_drop", "a share of the samples")):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0 <= value <= 0.5):
+                raise InputError(f"physics {name} is {what} in [0, 0.5], got {value}")
 
     def replace(self, **changes: Any) -> Physics:
         """A copy with ``changes`` (None values are ignored)."""
