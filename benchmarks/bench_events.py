@@ -87,13 +87,18 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
         tag += "_" + "_".join(f"{k}{v}" for k, v in sorted(changes.items()))
     path = Path(args.cache) / f"{tag}.mcap" if args.cache else None
     if path is not None and path.exists():
-        return read_run(path)
-    kw = {"physics": physics} if physics is not None else {}
-    run = sc.simulate(seed=seed, duration=args.duration, rate=args.rate, engine=args.engine,
-                      **kw).run
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_run(path, run)
+        run = read_run(path)
+    else:
+        kw = {"physics": physics} if physics is not None else {}
+        run = sc.simulate(seed=seed, duration=args.duration, rate=args.rate, engine=args.engine,
+                          **kw).run
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_run(path, run)
+    if args.known_compliance and args.joint_compliance:
+        # the analysis told the drives' compliance, as a datasheet would
+        run = dataclasses.replace(run, robot=dataclasses.replace(
+            run.robot, joint_compliance=args.joint_compliance))
     return run
 
 
@@ -164,6 +169,9 @@ def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
     ap.add_argument("--gravity", action="store_true")
     ap.add_argument("--joint-compliance", type=float, default=None,
                     help="[physics] transmission deflection at the effort limit, rad (~0.001)")
+    ap.add_argument("--known-compliance", action="store_true",
+                    help="[physics] give the analysis the simulated --joint-compliance (a "
+                         "datasheet's stiffness): contacts at the links' angles")
     ap.add_argument("--log-jitter", type=float, default=None,
                     help="[physics] relative std of each log interval (a rig's clock; ~0.05)")
     ap.add_argument("--log-drop", type=float, default=None,

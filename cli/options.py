@@ -287,41 +287,49 @@ class RigOptions:
     package_paths: tuple[Path, ...] = ()
     effort: str = "commanded"
     stiffness: tuple[float, ...] | None = None
+    compliance: tuple[float, ...] | None = None
 
     def read_kwargs(self) -> dict[str, Any]:
-        stiffness = (self.stiffness[0] if self.stiffness and len(self.stiffness) == 1
-                     else self.stiffness)
+        def one_or_each(values: tuple[float, ...] | None) -> Any:
+            return values[0] if values and len(values) == 1 else values
+
         return {"robot": None if self.robot is None else str(self.robot),
                 "base_link": self.base_link, "tip_link": self.tip_link,
                 "package_paths": tuple(str(p) for p in self.package_paths),
-                "effort": self.effort, "stiffness": stiffness}
+                "effort": self.effort, "stiffness": one_or_each(self.stiffness),
+                "joint_compliance": one_or_each(self.compliance)}
 
 
-def _stiffness(ctx: click.Context, param: click.Parameter, value: str | None
-               ) -> tuple[float, ...] | None:
-    if value is None:
-        return None
-    try:
-        values = tuple(float(v) for v in value.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected a number or comma-separated numbers, got "
-                                 f"{value!r}") from None
-    if not all(v > 0 and v != float("inf") for v in values):
-        raise click.BadParameter(f"expected positive stiffness values, got {value!r}")
-    return values
+def _per_joint(what: str, zero_ok: bool) -> Callable[..., tuple[float, ...] | None]:
+    """Click callback: one number, or one per joint separated by commas."""
+    def parse(ctx: click.Context, param: click.Parameter, value: str | None
+              ) -> tuple[float, ...] | None:
+        if value is None:
+            return None
+        try:
+            values = tuple(float(v) for v in value.split(","))
+        except ValueError:
+            raise click.BadParameter(f"expected a number or comma-separated numbers, got "
+                                     f"{value!r}") from None
+        if not all((v >= 0 if zero_ok else v > 0) and v != float("inf") for v in values):
+            raise click.BadParameter(f"expected {what} values, got {value!r}")
+        return values
+    return parse
 
 
 def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
-    """``--robot``, ``--base-link``, ``--tip-link``, ``--package-path``, ``--effort`` and
-    ``--stiffness``, handed to the command as one keyword ``rig`` (:class:`RigOptions`)."""
+    """``--robot``, ``--base-link``, ``--tip-link``, ``--package-path``, ``--effort``,
+    ``--stiffness`` and ``--joint-compliance``, handed to the command as one keyword ``rig``
+    (:class:`RigOptions`)."""
     from wholearm_tools.logs.records import TORQUE_SOURCES
 
     @functools.wraps(f)
     def command(*args: Any, robot_file: Path | None, base_link: str | None,
                 tip_link: str | None, package_paths: tuple[Path, ...], effort: str,
-                stiffness: tuple[float, ...] | None, **kwargs: Any) -> Any:
+                stiffness: tuple[float, ...] | None, compliance: tuple[float, ...] | None,
+                **kwargs: Any) -> Any:
         rig = RigOptions(robot_file, base_link, tip_link, tuple(package_paths), effort,
-                         stiffness)
+                         stiffness, compliance)
         return f(*args, rig=rig, **kwargs)
 
     options = [
@@ -339,9 +347,15 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
                      show_default=True,
                      help="Torque evidence: commanded torque on the command topic, measured "
                           "effort on the state topic, or commanded position x --stiffness."),
-        click.option("--stiffness", default=None, metavar="K[,K...]", callback=_stiffness,
+        click.option("--stiffness", default=None, metavar="K[,K...]",
+                     callback=_per_joint("positive stiffness", zero_ok=False),
                      help="Controller stiffness [N m/rad] for --effort position (one value, "
                           "or one per joint; default: the log's metadata)."),
+        click.option("--joint-compliance", "compliance", default=None, metavar="C[,C...]",
+                     callback=_per_joint("non-negative compliance", zero_ok=True),
+                     help="Transmission deflection at the effort limit [rad] for encoders on "
+                          "the motor side (effort / torsional stiffness; one value, or one per "
+                          "joint): contacts are placed at the links' angles. Default: stiff."),
     ]
     for option in reversed(options):
         command = option(command)

@@ -516,9 +516,12 @@ def _reconstruct(run: Run, params: ReconstructParams,
     timings["classify"] = time.perf_counter() - clock
     table = contact_table(run.robot, contacts, classification)
     clock = time.perf_counter()
-    hints = free_space_hints(run.robot, np.asarray(run.log.q), params.free_hints)
-    floor = position_noise_floor(run.robot, np.asarray(run.log.q))
+    q_link = run.robot.link_angles(run.log.q, run.log.tau_cmd)
+    hints = free_space_hints(run.robot, q_link, params.free_hints)
+    floor = position_noise_floor(run.robot, q_link)
     meta = {"source": run.source, "causal": params.causal, "duration": run.log.duration}
+    if q_link is not run.log.q:
+        meta["joint_compliance"] = run.robot.joint_compliance.tolist()
     if len(table) == 0:
         surface_map = SurfaceMap(planar=run.robot.planar, B=params.B, primitives=(),
                                  contacts={"count": 0}, meta=meta,
@@ -529,7 +532,7 @@ def _reconstruct(run: Run, params: ReconstructParams,
         from wholearm_tools.classify.swept import swept_map
 
         say(f"fitting primitives to {len(table)} contacts")
-        swept = (SweptTest(swept_map(run.robot, np.asarray(run.log.q), B=params.B))
+        swept = (SweptTest(swept_map(run.robot, q_link, B=params.B))
                  if params.use_sweep else None)
         surface_map, fits, table, messages = fit_table(
             table, planar=run.robot.planar, B=params.B, kinds=params.kinds, loss=params.loss,

@@ -52,17 +52,21 @@ def test_robot_json_and_the_ambiguous_branch(mesh_urdf: Path) -> None:
 
 
 def test_rig_options_reach_read_run() -> None:
-    rig = RigOptions(Path("arm.urdf"), None, "tool", (Path("share"),), "position", (5.0,))
+    rig = RigOptions(Path("arm.urdf"), None, "tool", (Path("share"),), "position", (5.0,),
+                     (0.001, 0.002))
     assert rig.read_kwargs() == {"robot": "arm.urdf", "base_link": None, "tip_link": "tool",
                                  "package_paths": ("share",), "effort": "position",
-                                 "stiffness": 5.0}
+                                 "stiffness": 5.0, "joint_compliance": (0.001, 0.002)}
     res = run("contacts", "--help")
     for option in ("--robot", "--base-link", "--tip-link", "--package-path", "--effort",
-                   "--stiffness"):
+                   "--stiffness", "--joint-compliance"):
         assert option in res.output
     res = run("contacts", __file__, "--B", "0.02", "--effort", "position", "--stiffness", "a,b")
     assert res.exit_code == 2
     assert "expected a number or comma-separated numbers" in res.output
+    res = run("contacts", __file__, "--B", "0.02", "--joint-compliance", "-0.001")
+    assert res.exit_code == 2
+    assert "expected non-negative compliance values" in res.output
 
 
 def test_robot_with_a_log_takes_the_branch_it_drives(mesh_urdf: Path, tmp_path) -> None:

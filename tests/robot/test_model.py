@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -116,3 +118,21 @@ def test_invalid_configurations_are_rejected() -> None:
     with pytest.raises(RobotModelError, match="lower limit"):
         RobotModel.from_spec({"joints": [{"radius": 0.01, "limits": [1, -1]}],
                               "tip": {"offset": [1, 0, 0]}})
+
+
+def test_motor_side_readings_become_link_angles_by_the_transmissions_deflection() -> None:
+    stiff = planar_two_link()
+    q = np.array([[0.3, -0.2], [0.31, -0.19]])
+    tau = np.array([[5.0, -2.0], [-10.0, 0.0]])
+    assert np.array_equal(stiff.link_angles(q, tau), q)
+    compliant = dataclasses.replace(stiff, joint_compliance=[0.001, 0.002])
+    effort = compliant.effort_limits
+    np.testing.assert_allclose(compliant.link_angles(q, tau),
+                               q - tau * np.array([0.001, 0.002]) / effort)
+    assert np.array_equal(compliant.link_angles(q, None), q)  # no torque logged: as read
+    with pytest.raises(RobotModelError, match="non-negative"):
+        dataclasses.replace(stiff, joint_compliance=-0.001)
+    with pytest.raises(RobotModelError, match="one joint compliance or 2"):
+        dataclasses.replace(stiff, joint_compliance=[0.001, 0.001, 0.001])
+    with pytest.raises(RobotModelError, match="positive effort limit"):
+        dataclasses.replace(stiff, effort_limits=[0.0, 1.0], joint_compliance=0.001)

@@ -9,6 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from cli.main import cli
+from wholearm_tools.contacts import detect_contacts
+from wholearm_tools.errors import InputError
 from wholearm_tools.geometry import (
     Arc2D,
     Circle2D,
@@ -181,6 +183,28 @@ def test_motor_side_encoders_read_the_transmissions_deflection() -> None:
         np.testing.assert_allclose(seen, deflection, atol=1e-4)
         if compliance:
             assert np.median(np.abs(deflection)) > 5e-4
+
+
+def test_contacts_told_the_compliance_settle_at_the_links_angles(tmp_path) -> None:
+    """Told the drives' compliance (a datasheet's stiffness), the detector places a contact
+    at the links' angles, not the motor side's; its signals, and so the contact found, stay
+    the same.  Read from the log, the compliance is the one given, checked per joint."""
+    robot = two_link()
+    res = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0),
+                       physics=Physics(joint_compliance=0.002))
+    path = tmp_path / "compliant.mcap"
+    write_run(path, res.run)
+    read = {c: read_run(path, joint_compliance=c) for c in (None, 0.002)}
+    assert np.array_equal(read[0.002].robot.joint_compliance, [0.002, 0.002])
+    found = {c: detect_contacts(run.log, run.robot) for c, run in read.items()}
+    assert len(found[None]) == len(found[0.002]) >= 1
+    assert np.array_equal(found[None].index, found[0.002].index)
+    assert np.array_equal(found[None].link, found[0.002].link)
+    true_q = res.q_true[found[None].index]
+    assert np.abs(found[None].q - true_q).max() > 5e-4      # the deflection, read as angle
+    assert np.abs(found[0.002].q - true_q).max() < 2e-4     # the links' angles
+    with pytest.raises(InputError, match=r"compliant\.mcap: .*one joint compliance or 2"):
+        read_run(path, joint_compliance=(0.001, 0.001, 0.001))
 
 
 def test_friction_makes_the_tip_slide_less() -> None:

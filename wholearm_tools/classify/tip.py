@@ -342,7 +342,7 @@ def _eq1_all(robot: RobotModel, log: JointLog, c: Contacts, B: float) -> FloatAr
     M = len(c)
     if M == 0:
         return np.zeros(0)
-    q = np.asarray(log.q)
+    q = robot.link_angles(log.q, log.tau_cmd)
     t = np.asarray(log.t)
     key = (_fingerprint(q), np.asarray(c.index).tobytes(),
            np.asarray(c.link).tobytes(), np.asarray(c.q).tobytes(), B)
@@ -393,7 +393,7 @@ class TipEvaluator:
         self.robot = robot
         if contacts.n_joints != robot.dof:
             raise InputError(f"contacts have {contacts.n_joints} joints, robot {robot.dof}")
-        q = np.asarray(log.q)
+        q = robot.link_angles(log.q, log.tau_cmd)
         if not np.all(np.isfinite(q)):
             raise InputError("log field q contains NaN or infinite values")
         self.grid = grid if grid is not None else swept_map(robot, q, B=self.B)

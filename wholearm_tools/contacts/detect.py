@@ -616,6 +616,9 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     q = np.asarray(log.q)
     qd = np.asarray(log.qd)
     tau = np.asarray(log.tau_cmd)
+    # the geometry of a contact (where it settled, what the arm swept) is the links'; the
+    # signals (rest, load) are the drives'
+    q_link = robot.link_angles(q, tau) if robot is not None else q
     qd_s = ev.smooth(qd, width)
     sigma_v = ev.velocity_noise(q, qd, dt, width)
     v_th = (np.broadcast_to(np.asarray(params.velocity_threshold, float), (n,)).copy()
@@ -685,7 +688,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     # moments the smoothed velocity does not resolve); looking back at most one release time
     for i, e in enumerate(events):
         s_, k_ = e.start, e.settle
-        settled = q[k_:min(k_ + min_len, e.end)]
+        settled = q_link[k_:min(k_ + min_len, e.end)]
         out_q[i] = np.median(settled, axis=0)
         back = max(0, s_ - lag - release)
         obs = list(e.obstructed)
@@ -727,7 +730,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         rows = [g[0] for g in groups]
         if by_map:
             beyond = np.arange(n)[None, :] > links[rows][:, None]
-            chosen, share = _choose_rigid(robot, q, out_q[rows], out_qd[rows], peak[rows],
+            chosen, share = _choose_rigid(robot, q_link, out_q[rows], out_qd[rows], peak[rows],
                                           held[rows], tau_th,
                                           [(g[1], g[2]) for g in groups],
                                           params.rigid_dilation,

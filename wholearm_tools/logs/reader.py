@@ -26,6 +26,7 @@ Rules (see ``docs/log-format.md``):
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import os
@@ -572,6 +573,7 @@ def read_run(
     base_link: str | None = None,
     tip_link: str | None = None,
     package_paths: Sequence[str | os.PathLike[str]] = (),
+    joint_compliance: float | Sequence[float] | None = None,
 ) -> Run:
     """Read a run: robot (``robot`` argument or the log's URDF), joint log, ground truth.
 
@@ -586,6 +588,9 @@ def read_run(
         branch the log's joints drive); log joints off the chain are ignored with a
         :class:`LogWarning` naming each, and listed in ``JointLog.ignored_joints``
     package_paths : folders that resolve the URDF's ``package://`` meshes
+    joint_compliance : deflection of each joint's transmission at its effort limit [rad], one
+        value or one per joint, for encoders on the motor side (``RobotModel.joint_compliance``;
+        default: the robot's, stiff for a URDF)
     """
     path = Path(path)
     scan = _scan(path, joint_topic, command_topic)
@@ -594,6 +599,11 @@ def read_run(
     log_joints = tuple(state.names) if isinstance(state, JointStateColumns) else ()
     model, ignored = _robot(scan, robot, log_joints, {
         "base_link": base_link, "tip_link": tip_link, "package_paths": tuple(package_paths)})
+    if joint_compliance is not None:
+        try:
+            model = dataclasses.replace(model, joint_compliance=joint_compliance)
+        except RobotModelError as exc:
+            raise InputError(f"{path}: {exc}") from None
     if ignored:
         _warn(f"{path}: topic {topic!r}: ignoring joints not in the robot: {list(ignored)} ("
               + "; ".join(f"{name}: {why}" for name, why in ignored.items()) + ")")

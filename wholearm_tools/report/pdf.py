@@ -258,6 +258,11 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
         what = f"{run.torque_source}: {run.torque_note}" if run.torque_note else \
             plain.get(run.torque_source, run.torque_source)
         lines.append(f"Torque evidence: {what}")
+    compliance = meta.get("joint_compliance")
+    if compliance:
+        each = sorted(set(compliance)) if len(set(compliance)) == 1 else compliance
+        lines.append("Transmissions: compliance " + ", ".join(f"{c * 1e3:.3g}" for c in each)
+                     + " mrad at the effort limit; contacts at the links' angles")
     if run.ignored_joints:
         lines.append("Log joints off the arm's chain (not used): "
                      + ", ".join(run.ignored_joints))

@@ -69,6 +69,10 @@ class RobotModel:
     lower, upper : (n,) float
         Joint limits in radians.
     velocity_limits, effort_limits : (n,) float
+    joint_compliance : (n,) float, optional
+        Deflection of each joint's transmission at its effort limit [rad] (a drive's torsional
+        stiffness ``k`` gives ``effort / k``), for encoders that read the motor side; zeros
+        (default) for encoders on the link or stiff drives.  See :meth:`link_angles`.
     """
 
     name: str
@@ -82,6 +86,7 @@ class RobotModel:
     upper: FloatArray
     velocity_limits: FloatArray
     effort_limits: FloatArray
+    joint_compliance: FloatArray | None = None
     planar: bool = field(init=False)
 
     def __post_init__(self) -> None:
@@ -106,6 +111,19 @@ class RobotModel:
                     raise RobotModelError(f"robot {self.name!r}: a joint axis is zero")
                 value = value / norms[:, None]
             object.__setattr__(self, attr, read_only(value))
+        compliance = np.asarray(0.0 if self.joint_compliance is None else self.joint_compliance,
+                                dtype=float)
+        if compliance.shape not in ((), (1,), (n,)):
+            raise RobotModelError(f"robot {self.name!r}: expected one joint compliance or {n} "
+                                  f"(one per joint), got {compliance.size}")
+        compliance = np.broadcast_to(compliance, (n,))
+        if not np.all(np.isfinite(compliance) & (compliance >= 0)):
+            raise RobotModelError(f"robot {self.name!r}: joint compliance must be finite and "
+                                  f"non-negative [rad at the effort limit], got {compliance}")
+        if np.any((compliance > 0) & ~(np.asarray(self.effort_limits, dtype=float) > 0)):
+            raise RobotModelError(f"robot {self.name!r}: a compliant joint needs a positive "
+                                  "effort limit (its compliance is the deflection there)")
+        object.__setattr__(self, "joint_compliance", read_only(compliance.copy()))
         if np.any(self.link_radii < 0) or self.tip_radius < 0:
             raise RobotModelError(f"robot {self.name!r}: negative link or tip radius")
         if float(np.linalg.norm(self.tip_offset)) < MIN_TIP_DISTANCE:
@@ -167,6 +185,18 @@ class RobotModel:
         pts = self.joint_positions(q)
         return bool(np.allclose(np.abs(axes_world @ z), 1.0, atol=1e-9)
                     and np.allclose(pts[..., 2], 0.0, atol=1e-9))
+
+    def link_angles(self, q: ArrayLike, tau: ArrayLike | None) -> FloatArray:
+        """Link-side joint angles from motor-side readings ``q (N, n)`` under the drives'
+        torques ``tau (N, n)``: ``q - c tau / effort`` (each transmission is a torsion spring
+        that deflects by ``c`` at the effort limit).  The geometry of a contact is the links';
+        the detector's signals stay the drives'.  ``q`` itself when the drives are stiff
+        (``joint_compliance`` all zero) or no torque was logged.
+        """
+        if tau is None or not np.any(self.joint_compliance > 0):
+            return np.asarray(q, dtype=float)
+        return (np.asarray(q, dtype=float)
+                - np.asarray(tau, dtype=float) * (self.joint_compliance / self.effort_limits))
 
     # ------------------------------------------------------------------ kinematics
     @property
