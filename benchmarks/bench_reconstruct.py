@@ -35,6 +35,7 @@ depend on the machine's cores).
 
 Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0-9] [--scenarios a,b]
       [--engine physics] [--duration 120] [--no-tip-only] [--cache DIR]
+      [--joint-compliance 0.001 [--known-compliance | --learn-compliance]]
 """
 
 from __future__ import annotations
@@ -215,6 +216,9 @@ def main() -> None:
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     add_run_options(ap, "kinematic")
     ap.add_argument("--no-tip-only", action="store_true", help="skip the tip-only refit")
+    ap.add_argument("--learn-compliance", action="store_true",
+                    help="learn the drives' compliance from a first map, then reconstruct at "
+                         "the links' angles (reconstruct's learn_compliance)")
     args = ap.parse_args()
     seeds = seeds_arg(args.seeds)
     warnings.simplefilter("ignore")
@@ -225,7 +229,7 @@ def main() -> None:
         for seed in seeds:
             run = get_run(name, seed, args)
             t0, c0 = time.perf_counter(), time.process_time()
-            rec = reconstruct(run, B=B, workers=1)
+            rec = reconstruct(run, B=B, workers=1, learn_compliance=args.learn_compliance)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             cov = coverage(rec)
             det = determined(rec)

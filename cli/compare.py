@@ -64,7 +64,8 @@ def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
 
     prepare_output_dir(out_dir, list(OUTPUT_NAMES), overwrite)
     read_options = {"joint_topic": joint_topic, "command_topic": command_topic,
-                    "require_commands": True, **rig.read_kwargs()}
+                    "require_commands": True, **rig.read_kwargs(maps=True)}
+    learned = {"learn_compliance": True} if rig.learn_compliance else {}
     pairs = len({p.resolve() for p in logs}) * len(set(Bs))
     try:
         if progress_enabled():
@@ -72,14 +73,14 @@ def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
                                    file=sys.stderr) as bar:
                 table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
                                      read_options=read_options, causal=causal, loss=loss,
-                                     progress=lambda done, total: bar.update(1))
+                                     progress=lambda done, total: bar.update(1), **learned)
         else:
             def progress(done: int, total: int) -> None:
                 log.info("%d of %d (log, B) pairs reconstructed", done, total)
 
             table = compare_runs(logs, Bs, scheduler=scheduler, workers=workers,
                                  read_options=read_options, causal=causal, loss=loss,
-                                 progress=progress)
+                                 progress=progress, **learned)
         paths = write_comparison(out_dir, table)
     except WholearmError as exc:  # one line, however the command is mounted
         raise click.ClickException(str(exc)) from None

@@ -287,25 +287,39 @@ class RigOptions:
     package_paths: tuple[Path, ...] = ()
     effort: str = "commanded"
     stiffness: tuple[float, ...] | None = None
-    compliance: tuple[float, ...] | None = None
+    compliance: tuple[float, ...] | str | None = None
 
-    def read_kwargs(self) -> dict[str, Any]:
-        def one_or_each(values: tuple[float, ...] | None) -> Any:
+    @property
+    def learn_compliance(self) -> bool:
+        """``--joint-compliance auto``: learned from the map (``reconstruct``'s option)."""
+        return self.compliance == "auto"
+
+    def read_kwargs(self, *, maps: bool = False) -> dict[str, Any]:
+        """The ``read_run`` keywords; ``maps``: the command fits a map (it can learn the
+        compliance; other commands refuse ``--joint-compliance auto``)."""
+        def one_or_each(values: Any) -> Any:
             return values[0] if values and len(values) == 1 else values
 
+        if self.learn_compliance and not maps:
+            raise click.UsageError("--joint-compliance auto learns the compliance from a "
+                                   "fitted map: reconstruct, report and compare take it")
         return {"robot": None if self.robot is None else str(self.robot),
                 "base_link": self.base_link, "tip_link": self.tip_link,
                 "package_paths": tuple(str(p) for p in self.package_paths),
                 "effort": self.effort, "stiffness": one_or_each(self.stiffness),
-                "joint_compliance": one_or_each(self.compliance)}
+                "joint_compliance": (None if self.learn_compliance
+                                     else one_or_each(self.compliance))}
 
 
-def _per_joint(what: str, zero_ok: bool) -> Callable[..., tuple[float, ...] | None]:
-    """Click callback: one number, or one per joint separated by commas."""
+def _per_joint(what: str, zero_ok: bool, auto: bool = False
+               ) -> Callable[..., tuple[float, ...] | str | None]:
+    """Click callback: one number, or one per joint separated by commas (or ``auto``)."""
     def parse(ctx: click.Context, param: click.Parameter, value: str | None
-              ) -> tuple[float, ...] | None:
+              ) -> tuple[float, ...] | str | None:
         if value is None:
             return None
+        if auto and value.strip().lower() == "auto":
+            return "auto"
         try:
             values = tuple(float(v) for v in value.split(","))
         except ValueError:
@@ -326,8 +340,8 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
     @functools.wraps(f)
     def command(*args: Any, robot_file: Path | None, base_link: str | None,
                 tip_link: str | None, package_paths: tuple[Path, ...], effort: str,
-                stiffness: tuple[float, ...] | None, compliance: tuple[float, ...] | None,
-                **kwargs: Any) -> Any:
+                stiffness: tuple[float, ...] | None,
+                compliance: tuple[float, ...] | str | None, **kwargs: Any) -> Any:
         rig = RigOptions(robot_file, base_link, tip_link, tuple(package_paths), effort,
                          stiffness, compliance)
         return f(*args, rig=rig, **kwargs)
@@ -351,11 +365,13 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
                      callback=_per_joint("positive stiffness", zero_ok=False),
                      help="Controller stiffness [N m/rad] for --effort position (one value, "
                           "or one per joint; default: the log's metadata)."),
-        click.option("--joint-compliance", "compliance", default=None, metavar="C[,C...]",
-                     callback=_per_joint("non-negative compliance", zero_ok=True),
+        click.option("--joint-compliance", "compliance", default=None,
+                     metavar="C[,C...]|auto",
+                     callback=_per_joint("non-negative compliance", zero_ok=True, auto=True),
                      help="Transmission deflection at the effort limit [rad] for encoders on "
                           "the motor side (effort / torsional stiffness; one value, or one per "
-                          "joint): contacts are placed at the links' angles. Default: stiff."),
+                          "joint): contacts are placed at the links' angles. 'auto' learns it "
+                          "from a first map (reconstruct, report, compare). Default: stiff."),
     ]
     for option in reversed(options):
         command = option(command)

@@ -65,7 +65,7 @@ def command(run: Path, B: float, output: Path, steps: int, rig: RigOptions,
     with stage("detecting contacts"):
         contacts = detect_contacts(data.log, data.robot)
     with stage(f"replaying the swept map at {steps} times"):
-        grid = swept_map(data.robot, data.log.q, B=B)
+        grid = swept_map(data.robot, data.robot.link_angles(data.log.q, data.log.tau_cmd), B=B)
         times = np.linspace(data.log.t[0], data.log.t[-1], steps)
         hist = tip_probability_history(data, contacts, B, times, grid=grid)
 

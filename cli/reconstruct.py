@@ -111,11 +111,11 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: Ri
     with OutputSet(out_dir, reconstruction_names(), overwrite=overwrite) as out:
         with stage(f"reading {run}"):
             data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                            require_commands=True, **rig.read_kwargs())
+                            require_commands=True, **rig.read_kwargs(maps=True))
         check_B(B, data.robot, what="--B")
         with stage(f"reconstructing with B = {B:g} m") as step:
             rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers,
-                              progress=step)
+                              learn_compliance=rig.learn_compliance, progress=step)
         if not rec.surface_map.primitives:
             reason = "; ".join(rec.messages) or "no primitive explains the contacts"
             raise click.ClickException(f"{run}: nothing could be fitted ({reason})")

@@ -125,10 +125,11 @@ def _from_log(run: Path, output: Path, *, B: float, causal: bool, loss: str, rig
 
     with stage(f"reading {run}"):
         data = read_run(run, joint_topic=joint_topic, command_topic=command_topic,
-                        require_commands=True, **rig.read_kwargs())
+                        require_commands=True, **rig.read_kwargs(maps=True))
     check_B(B, data.robot, what="--B")
     with stage(f"reconstructing with B = {B:g} m") as step:
-        rec = reconstruct(data, B=B, causal=causal, loss=loss, progress=step)
+        rec = reconstruct(data, B=B, causal=causal, loss=loss,
+                          learn_compliance=rig.learn_compliance, progress=step)
     folder = output.parent if str(output.parent) else Path(".")
     sm = map_with_provenance(rec.surface_map, folder, run, "log", reconstruction_parameters(rec))
     record = sm.meta["input"]

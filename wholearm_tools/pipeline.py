@@ -39,6 +39,10 @@ class ReconstructParams:
     use_sweep : score hypotheses against the B-dilated swept map (the free-space term)
     workers : processes for the seed fits (None: every core, at most 8); the map does not
         depend on it
+    learn_compliance : learn the drives' compliance from a first map made at the readings
+        (:func:`wholearm_tools.calibration.estimate_compliance`), then reconstruct at the
+        links' angles; for encoders on the motor side of drives whose stiffness is not known
+        (the robot must be stiff: a known compliance is given on the robot instead)
     """
 
     B: float = 0.02
@@ -49,6 +53,7 @@ class ReconstructParams:
     free_hints: int = 400
     use_sweep: bool = True
     workers: int | None = None
+    learn_compliance: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.B) and self.B > 0):
@@ -496,7 +501,32 @@ def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | 
     """
     params = ReconstructParams(B=B, **options)
     with one_blas_thread():
-        return _reconstruct(run, params, progress)
+        if not params.learn_compliance:
+            return _reconstruct(run, params, progress)
+        return _learning_compliance(run, params, progress)
+
+
+def _learning_compliance(run: Run, params: ReconstructParams,
+                         progress: Callable[[str], None] | None) -> Reconstruction:
+    """The map at the readings, the compliance that puts its contacts on its primitives, and
+    the map again at the links' angles under that compliance."""
+    from wholearm_tools.calibration import estimate_compliance
+
+    if np.any(run.robot.joint_compliance > 0):
+        raise InputError("the drives' compliance is given: it cannot be learned as well")
+    first = _reconstruct(run, params, progress)
+    estimate = estimate_compliance(first)
+    if not estimate.readings:
+        return dataclasses.replace(first, messages=(
+            *first.messages, "the drives' compliance was not learned: no reported primitive "
+            "holds the contacts it would be learned from"))
+    robot = dataclasses.replace(run.robot, joint_compliance=estimate.compliance)
+    rec = _reconstruct(dataclasses.replace(run, robot=robot), params, progress)
+    meta = {**rec.surface_map.meta, "joint_compliance_std": estimate.std.tolist()}
+    return dataclasses.replace(
+        rec, surface_map=dataclasses.replace(rec.surface_map, meta=meta),
+        timings={k: first.timings.get(k, 0.0) + v for k, v in rec.timings.items()},
+        messages=(*rec.messages, estimate.describe()))
 
 
 def _reconstruct(run: Run, params: ReconstructParams,

@@ -67,6 +67,12 @@ def test_rig_options_reach_read_run() -> None:
     res = run("contacts", __file__, "--B", "0.02", "--joint-compliance", "-0.001")
     assert res.exit_code == 2
     assert "expected non-negative compliance values" in res.output
+    learn = RigOptions(compliance="auto")
+    assert learn.learn_compliance
+    assert learn.read_kwargs(maps=True)["joint_compliance"] is None
+    res = run("contacts", __file__, "--B", "0.02", "--joint-compliance", "auto")
+    assert res.exit_code == 2
+    assert "--joint-compliance auto learns the compliance from a fitted map" in res.output
 
 
 def test_robot_with_a_log_takes_the_branch_it_drives(mesh_urdf: Path, tmp_path) -> None:

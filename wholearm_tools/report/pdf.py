@@ -262,7 +262,9 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
     if compliance:
         each = sorted(set(compliance)) if len(set(compliance)) == 1 else compliance
         lines.append("Transmissions: compliance " + ", ".join(f"{c * 1e3:.3g}" for c in each)
-                     + " mrad at the effort limit; contacts at the links' angles")
+                     + " mrad at the effort limit"
+                     + (" (learned from the map)" if meta.get("joint_compliance_std") else "")
+                     + "; contacts at the links' angles")
     if run.ignored_joints:
         lines.append("Log joints off the arm's chain (not used): "
                      + ", ".join(run.ignored_joints))
