@@ -7,10 +7,12 @@ differently is read at depths that differ by the difference of the deflections. 
 makes ``c`` observable: the contacts a reported primitive explains are re-read at
 ``q - c tau / effort`` and ``c`` is fitted jointly with every primitive's parameters, so that
 the readings lie on their surfaces (a calibration of the arm against the surfaces it
-touched).  Joints whose torques hardly vary between the contacts of one surface leave ``c``
-undetermined there; a Gaussian prior (``prior`` rad, the range of harmonic drives) holds
-those near stiff.  The stops' own torque ramps do not serve: the deflection builds up during
-the impact, whose motion dominates the reading (docs/method.md).
+touched).  A joint whose torque hardly varies between the contacts of one surface leaves its
+own ``c`` undetermined, so ``c`` is the arm's common compliance plus each joint's departure
+from it, under Gaussian priors (``prior`` on the common part, the range of harmonic drives;
+``spread`` on the departures: drives sized to their loads deflect alike at their effort
+limits).  The stops' own torque ramps do not serve: the deflection builds up during the
+impact, whose motion dominates the reading (docs/method.md).
 """
 
 from __future__ import annotations
@@ -99,8 +101,9 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
     ``rec`` is a :class:`~wholearm_tools.pipeline.Reconstruction` made at the readings (a
     stiff robot).  Each contact on a reported primitive keeps the reading the fit explained
     it by (its tip sphere or its link's side, on the map's link); ``c`` and the primitives'
-    parameters minimise the Huber cost of those readings' clearances plus the prior
-    ``sum (c_j / prior)^2`` in units of the noise, with ``c >= 0``.
+    parameters minimise the Huber cost of those readings' clearances plus the priors on the
+    common compliance and each joint's departure from it, in units of the map's noise level,
+    with ``c >= 0``.
     """
     from scipy.optimize import least_squares
 
