@@ -138,7 +138,9 @@ class Contacts:
     index : (M,) int
         Index in the log of the sample where the contact settled, where ``q`` is measured.
     q : (M, n) float
-        Joint positions where the contact settled (median over the first samples from there).
+        Joint positions where the contact settled (median over the first samples from there),
+        at the links' angles where the robot's drives are compliant
+        (``RobotModel.link_angles``).
     qd_before : (M, n) float
         Joint velocities just before the impact (joints that were already at rest set to 0):
         the motion that led into the contact, which eq. (2) integrates against, not the bounce
