@@ -98,10 +98,11 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
                         spread: float = DEFAULT_SPREAD) -> ComplianceEstimate:
     """The drives' compliance that puts ``rec``'s contacts on its reported primitives.
 
-    ``rec`` is a :class:`~wholearm_tools.pipeline.Reconstruction` made at the readings (a
-    stiff robot).  Each contact on a reported primitive keeps the reading the fit explained
-    it by (its tip sphere or its link's side, on the map's link); ``c`` and the primitives'
-    parameters minimise the Huber cost of those readings' clearances plus the priors on the
+    ``rec`` is a :class:`~wholearm_tools.pipeline.Reconstruction`, made at the readings or
+    under a compliance (its contacts are then read back to the drives' angles first).  Each
+    contact on a reported primitive keeps the reading the fit explained it by (its tip
+    sphere or its link's side, on the map's link); ``c`` and the primitives' parameters
+    minimise the Huber cost of those readings' clearances plus the priors on the
     common compliance and each joint's departure from it, in units of the map's noise level,
     with ``c >= 0``.
     """
@@ -111,9 +112,6 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
     robot = run.robot
     n, dim = robot.dof, robot.dim
     none = ComplianceEstimate(np.zeros(n), np.full(n, np.inf), 0, 0)
-    if np.any(robot.joint_compliance > 0):
-        raise InputError("estimate the compliance from a map made at the readings (a stiff "
-                         "robot)")
     if run.log.tau_cmd is None or not rec.fits:
         return none
     rows = np.flatnonzero(np.asarray(table.primitive) >= 0)
@@ -121,7 +119,8 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
         return none
     per_effort = settled_values(contacts, run.log, np.asarray(run.log.tau_cmd))[rows] \
         / robot.effort_limits
-    q0 = np.asarray(contacts.q)[rows]
+    # the drives' readings (a map made under a compliance has its contacts at the links')
+    q0 = np.asarray(contacts.q)[rows] + robot.joint_compliance * per_effort
     tip = np.asarray(table.used_as_tip)[rows]
     link = np.asarray(table.link_by_map)[rows]
     link = np.where(link >= 0, link, np.asarray(table.link)[rows])

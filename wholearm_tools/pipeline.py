@@ -22,6 +22,9 @@ from wholearm_tools.logs.records import Run
 from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap
 from wholearm_tools.robot.model import RobotModel
 
+#: most maps ``learn_compliance`` makes (the first at the readings)
+LEARNING_PASSES = 3
+
 #: primitive types tried by fit-and-grow, by workspace dimension
 KINDS_BY_DIM = {2: ("line", "circle"), 3: ("plane", "sphere", "cylinder", "cone", "torus")}
 
@@ -508,24 +511,37 @@ def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | 
 
 def _learning_compliance(run: Run, params: ReconstructParams,
                          progress: Callable[[str], None] | None) -> Reconstruction:
-    """The map at the readings, the compliance that puts its contacts on its primitives, and
-    the map again at the links' angles under that compliance."""
+    """The map at the readings, then in turn the compliance that puts the map's contacts on
+    its primitives and the map again at the links' angles under it: a map made at a closer
+    compliance holds more of the contacts, which tell the compliance better.  Stops when the
+    compliance moves by less than its standard error, after at most
+    :data:`LEARNING_PASSES` maps."""
     from wholearm_tools.calibration import estimate_compliance
 
     if np.any(run.robot.joint_compliance > 0):
         raise InputError("the drives' compliance is given: it cannot be learned as well")
-    first = _reconstruct(run, params, progress)
-    estimate = estimate_compliance(first)
-    if not estimate.readings:
-        return dataclasses.replace(first, messages=(
-            *first.messages, "the drives' compliance was not learned: no reported primitive "
+    rec = _reconstruct(run, params, progress)
+    timings = dict(rec.timings)
+    estimate = None
+    for _ in range(LEARNING_PASSES - 1):
+        new = estimate_compliance(rec)
+        if not new.readings:
+            break
+        moved = (estimate is None
+                 or np.any(np.abs(new.compliance - estimate.compliance) > new.std))
+        estimate = new
+        if not moved:
+            break
+        robot = dataclasses.replace(run.robot, joint_compliance=estimate.compliance)
+        rec = _reconstruct(dataclasses.replace(run, robot=robot), params, progress)
+        timings = {k: timings.get(k, 0.0) + v for k, v in rec.timings.items()}
+    if estimate is None:
+        return dataclasses.replace(rec, messages=(
+            *rec.messages, "the drives' compliance was not learned: no reported primitive "
             "holds the contacts it would be learned from"))
-    robot = dataclasses.replace(run.robot, joint_compliance=estimate.compliance)
-    rec = _reconstruct(dataclasses.replace(run, robot=robot), params, progress)
     meta = {**rec.surface_map.meta, "joint_compliance_std": estimate.std.tolist()}
     return dataclasses.replace(
-        rec, surface_map=dataclasses.replace(rec.surface_map, meta=meta),
-        timings={k: first.timings.get(k, 0.0) + v for k, v in rec.timings.items()},
+        rec, surface_map=dataclasses.replace(rec.surface_map, meta=meta), timings=timings,
         messages=(*rec.messages, estimate.describe()))
 
 
