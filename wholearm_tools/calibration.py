@@ -55,12 +55,13 @@ def settled_values(contacts: Any, log: Any, values: FloatArray) -> FloatArray:
     """``values (N, n)`` of the log where each contact settled: the median over the samples
     its configuration ``q`` was taken from (``contacts.index`` on, ``min_stop_samples`` long,
     ending at its release)."""
+    from wholearm_tools.contacts.detect import settled_window
+
     length = int(contacts.meta.get("min_stop_samples", 1))
-    t = np.asarray(log.t)
-    end = np.searchsorted(t, np.asarray(contacts.t_end), side="left")
+    end = np.searchsorted(np.asarray(log.t), np.asarray(contacts.t_end), side="left")
     out = np.empty((len(contacts), values.shape[1]))
     for i, k in enumerate(np.asarray(contacts.index)):
-        out[i] = np.median(values[k:max(k + 1, min(k + length, int(end[i])))], axis=0)
+        out[i] = np.median(values[settled_window(int(k), length, int(end[i]))], axis=0)
     return out
 
 

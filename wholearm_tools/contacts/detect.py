@@ -582,6 +582,12 @@ def _rigid_group(link: int, travel: FloatArray, resolution: FloatArray,
     return m
 
 
+def settled_window(index: int, length: int, end: int) -> slice:
+    """The samples a contact's configuration is taken from: ``length`` from ``index``, where
+    it settled, and none past ``end``, its release (at least the first)."""
+    return slice(index, max(index + 1, min(index + length, end)))
+
+
 def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                     params: DetectionParams | None = None) -> Contacts:
     """Detect contact events and identify the link in contact from ``qd`` and ``tau_cmd`` only.
@@ -690,7 +696,7 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     # moments the smoothed velocity does not resolve); looking back at most one release time
     for i, e in enumerate(events):
         s_, k_ = e.start, e.settle
-        settled = q_link[k_:min(k_ + min_len, e.end)]
+        settled = q_link[settled_window(k_, min_len, e.end)]
         out_q[i] = np.median(settled, axis=0)
         back = max(0, s_ - lag - release)
         obs = list(e.obstructed)
