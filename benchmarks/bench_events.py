@@ -80,7 +80,7 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
             changes["joint_friction"] = args.joint_friction
         if args.gravity:
             changes["gravity"] = True
-        for key in ("joint_compliance", "log_jitter", "log_drop"):
+        for key in ("joint_compliance", "joint_backlash", "log_jitter", "log_drop"):
             if getattr(args, key) is not None:
                 changes[key] = getattr(args, key)
         physics = dataclasses.replace(physics, **changes)
@@ -95,10 +95,11 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             write_run(path, run)
-    if args.known_compliance and args.joint_compliance:
-        # the analysis told the drives' compliance, as a datasheet would
-        run = dataclasses.replace(run, robot=dataclasses.replace(
-            run.robot, joint_compliance=args.joint_compliance))
+    told = {k: getattr(args, k) for k in ("joint_compliance", "joint_backlash")
+            if getattr(args, k)} if args.known_compliance else {}
+    if told:
+        # the analysis told the drives' compliance and play, as a datasheet would
+        run = dataclasses.replace(run, robot=dataclasses.replace(run.robot, **told))
     return run
 
 
@@ -169,9 +170,12 @@ def add_run_options(ap: argparse.ArgumentParser, engine: str) -> None:
     ap.add_argument("--gravity", action="store_true")
     ap.add_argument("--joint-compliance", type=float, default=None,
                     help="[physics] transmission deflection at the effort limit, rad (~0.001)")
-    ap.add_argument("--known-compliance", action="store_true",
-                    help="[physics] give the analysis the simulated --joint-compliance (a "
-                         "datasheet's stiffness): contacts at the links' angles")
+    ap.add_argument("--joint-backlash", type=float, default=None,
+                    help="[physics] transmission lost motion, rad (gearboxes 0.0003-0.004)")
+    ap.add_argument("--known-compliance", "--known-drives", dest="known_compliance",
+                    action="store_true",
+                    help="[physics] give the analysis the simulated --joint-compliance and "
+                         "--joint-backlash (a datasheet's): contacts at the links' angles")
     ap.add_argument("--log-jitter", type=float, default=None,
                     help="[physics] relative std of each log interval (a rig's clock; ~0.05)")
     ap.add_argument("--log-drop", type=float, default=None,

@@ -288,6 +288,7 @@ class RigOptions:
     effort: str = "commanded"
     stiffness: tuple[float, ...] | None = None
     compliance: tuple[float, ...] | str | None = None
+    backlash: tuple[float, ...] | None = None
 
     @property
     def learn_compliance(self) -> bool:
@@ -308,7 +309,8 @@ class RigOptions:
                 "package_paths": tuple(str(p) for p in self.package_paths),
                 "effort": self.effort, "stiffness": one_or_each(self.stiffness),
                 "joint_compliance": (None if self.learn_compliance
-                                     else one_or_each(self.compliance))}
+                                     else one_or_each(self.compliance)),
+                "joint_backlash": one_or_each(self.backlash)}
 
 
 def _per_joint(what: str, zero_ok: bool, auto: bool = False
@@ -333,17 +335,18 @@ def _per_joint(what: str, zero_ok: bool, auto: bool = False
 
 def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """``--robot``, ``--base-link``, ``--tip-link``, ``--package-path``, ``--effort``,
-    ``--stiffness`` and ``--joint-compliance``, handed to the command as one keyword ``rig``
-    (:class:`RigOptions`)."""
+    ``--stiffness``, ``--joint-compliance`` and ``--joint-backlash``, handed to the command as
+    one keyword ``rig`` (:class:`RigOptions`)."""
     from wholearm_tools.logs.records import TORQUE_SOURCES
 
     @functools.wraps(f)
     def command(*args: Any, robot_file: Path | None, base_link: str | None,
                 tip_link: str | None, package_paths: tuple[Path, ...], effort: str,
                 stiffness: tuple[float, ...] | None,
-                compliance: tuple[float, ...] | str | None, **kwargs: Any) -> Any:
+                compliance: tuple[float, ...] | str | None,
+                backlash: tuple[float, ...] | None, **kwargs: Any) -> Any:
         rig = RigOptions(robot_file, base_link, tip_link, tuple(package_paths), effort,
-                         stiffness, compliance)
+                         stiffness, compliance, backlash)
         return f(*args, rig=rig, **kwargs)
 
     options = [
@@ -372,6 +375,12 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
                           "the motor side (effort / torsional stiffness; one value, or one per "
                           "joint): contacts are placed at the links' angles. 'auto' learns it "
                           "from a first map (reconstruct, report, compare). Default: stiff."),
+        click.option("--joint-backlash", "backlash", default=None, metavar="B[,B...]",
+                     callback=_per_joint("non-negative backlash", zero_ok=True),
+                     help="Lost motion of each transmission [rad] for encoders on the motor "
+                          "side (one value, or one per joint): contacts are placed at the "
+                          "links' angles, the play closed on the side each drive pushes. "
+                          "Default: none."),
     ]
     for option in reversed(options):
         command = option(command)

@@ -35,6 +35,7 @@ _PHYSICS_OPTIONS = {
     "contact_dampratio": "contact_dampratio",
     "physics_rate": "rate",
     "joint_compliance": "joint_compliance",
+    "joint_backlash": "joint_backlash",
     "log_jitter": "log_jitter",
     "log_drop": "log_drop",
 }
@@ -99,6 +100,9 @@ def _scenario_source(scenario: str) -> None:
               help="[physics] Deflection of each joint's transmission at its effort limit in "
                    "rad, read by motor-side encoders (default: the scenario's, 0; harmonic "
                    "drives 0.0005-0.002).")
+@click.option("--joint-backlash", type=click.FloatRange(min=0.0, max=0.1), default=None,
+              help="[physics] Lost motion of each joint's transmission in rad, read by "
+                   "motor-side encoders (default: the scenario's, 0; gearboxes 0.0003-0.004).")
 @click.option("--log-jitter", type=click.FloatRange(min=0.0, max=0.5), default=None,
               help="[physics] A rig's log clock: relative standard deviation of each interval "
                    "between samples, stamped when taken (default: the scenario's, 0; real "

@@ -118,9 +118,10 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
     rows = np.flatnonzero(np.asarray(table.primitive) >= 0)
     if len(rows) <= n:
         return none
-    per_effort = settled_values(contacts, run.log, np.asarray(run.log.tau_cmd))[rows] \
-        / robot.effort_limits
-    # the drives' readings (a map made under a compliance has its contacts at the links')
+    tau = np.asarray(run.log.tau_cmd)
+    per_effort = settled_values(contacts, run.log, tau)[rows] / robot.effort_limits
+    # the drives' readings, less a play that is known (a map made under a compliance has its
+    # contacts at the links')
     q0 = np.asarray(contacts.q)[rows] + robot.joint_compliance * per_effort
     tip = np.asarray(table.used_as_tip)[rows]
     link = np.asarray(table.link_by_map)[rows]

@@ -562,7 +562,8 @@ def _reconstruct(run: Run, params: ReconstructParams,
     timings["classify"] = time.perf_counter() - clock
     table = contact_table(run.robot, contacts, classification)
     clock = time.perf_counter()
-    # where the links were (the drives' readings less the transmissions' deflection); the
+    # where the links were (the drives' readings less the transmissions' deflection and
+    # play); the
     # resolution of a contact is the encoders' (a deflection subtracted from the torques is
     # no quantised reading: its rest would show no noise)
     q_link = run.robot.link_angles(run.log.q, run.log.tau_cmd)
@@ -571,6 +572,8 @@ def _reconstruct(run: Run, params: ReconstructParams,
     meta = {"source": run.source, "causal": params.causal, "duration": run.log.duration}
     if q_link is not run.log.q:
         meta["joint_compliance"] = run.robot.joint_compliance.tolist()
+        if np.any(run.robot.joint_backlash > 0):
+            meta["joint_backlash"] = run.robot.joint_backlash.tolist()
     if len(table) == 0:
         surface_map = SurfaceMap(planar=run.robot.planar, B=params.B, primitives=(),
                                  contacts={"count": 0}, meta=meta,

@@ -53,13 +53,14 @@ def test_robot_json_and_the_ambiguous_branch(mesh_urdf: Path) -> None:
 
 def test_rig_options_reach_read_run() -> None:
     rig = RigOptions(Path("arm.urdf"), None, "tool", (Path("share"),), "position", (5.0,),
-                     (0.001, 0.002))
+                     (0.001, 0.002), (0.003,))
     assert rig.read_kwargs() == {"robot": "arm.urdf", "base_link": None, "tip_link": "tool",
                                  "package_paths": ("share",), "effort": "position",
-                                 "stiffness": 5.0, "joint_compliance": (0.001, 0.002)}
+                                 "stiffness": 5.0, "joint_compliance": (0.001, 0.002),
+                                 "joint_backlash": 0.003}
     res = run("contacts", "--help")
     for option in ("--robot", "--base-link", "--tip-link", "--package-path", "--effort",
-                   "--stiffness", "--joint-compliance"):
+                   "--stiffness", "--joint-compliance", "--joint-backlash"):
         assert option in res.output
     res = run("contacts", __file__, "--B", "0.02", "--effort", "position", "--stiffness", "a,b")
     assert res.exit_code == 2
@@ -67,6 +68,9 @@ def test_rig_options_reach_read_run() -> None:
     res = run("contacts", __file__, "--B", "0.02", "--joint-compliance", "-0.001")
     assert res.exit_code == 2
     assert "expected non-negative compliance values" in res.output
+    res = run("contacts", __file__, "--B", "0.02", "--joint-backlash", "0.001,x")
+    assert res.exit_code == 2
+    assert "expected a number or comma-separated numbers" in res.output
     learn = RigOptions(compliance="auto")
     assert learn.learn_compliance
     assert learn.read_kwargs(maps=True)["joint_compliance"] is None

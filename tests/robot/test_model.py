@@ -9,6 +9,7 @@ import pytest
 
 from wholearm_tools.errors import InputError, RobotModelError
 from wholearm_tools.robot import RobotModel, load_urdf, robot_from_urdf, robot_to_urdf
+from wholearm_tools.robot.model import PLAY_TORQUE
 
 
 def planar_two_link(l1: float = 0.5, l2: float = 0.3) -> RobotModel:
@@ -136,3 +137,22 @@ def test_motor_side_readings_become_link_angles_by_the_transmissions_deflection(
         dataclasses.replace(stiff, joint_compliance=[0.001, 0.001, 0.001])
     with pytest.raises(RobotModelError, match="positive effort limit"):
         dataclasses.replace(stiff, effort_limits=[0.0, 1.0], joint_compliance=0.001)
+
+
+def test_a_drives_play_is_closed_on_the_side_it_last_pushed() -> None:
+    """Backlash: the reading leads the link by half the play in the direction the drive
+    pushes, and keeps the side it last pushed while the torque is too small to turn the motor
+    through the gap (nothing is known before the first push)."""
+    robot = dataclasses.replace(planar_two_link(), joint_backlash=[0.002, 0.0])
+    band = PLAY_TORQUE * robot.effort_limits[0]
+    tau = np.zeros((6, 2))
+    tau[:, 0] = [0.0, 3 * band, 0.5 * band, -0.5 * band, -3 * band, 0.0]
+    np.testing.assert_array_equal(robot.load_direction(tau)[:, 0], [0, 1, 1, 1, -1, -1])
+    q = np.full((6, 2), 0.3)
+    link = robot.link_angles(q, tau)
+    np.testing.assert_allclose(link[:, 0], 0.3 - 0.001 * np.array([0, 1, 1, 1, -1, -1]))
+    np.testing.assert_array_equal(link[:, 1], q[:, 1])     # a joint without play: as read
+    with pytest.raises(RobotModelError, match="one joint backlash or 2"):
+        dataclasses.replace(robot, joint_backlash=[0.001, 0.001, 0.001])
+    with pytest.raises(RobotModelError, match="backlash must be finite and non-negative"):
+        dataclasses.replace(robot, joint_backlash=float("nan"))

@@ -207,6 +207,31 @@ def test_contacts_told_the_compliance_settle_at_the_links_angles(tmp_path) -> No
         read_run(path, joint_compliance=(0.001, 0.001, 0.001))
 
 
+def test_motor_side_encoders_read_the_play_closed_on_the_pushed_side(tmp_path) -> None:
+    """With play in the transmissions the encoders lead the link by half the play in the
+    direction the drive pushes: pressing a wall, the blocked shoulder is read 1 mrad (a
+    hundred times the encoder's noise) beyond its link.  Told the play, the detector places
+    the contact at the links' angles; the contact found stays the same."""
+    robot = two_link()
+    res = run_scripted(robot, wall(0.55), [(-0.4, 0.0)], home=(1.0, 0.0),
+                       physics=Physics(joint_backlash=0.002))
+    log = res.run.log
+    effort = robot.effort_limits[0]
+    pressing = np.flatnonzero(np.abs(log.tau_cmd[:-1, 0]) > 0.5 * effort) + 1
+    assert pressing.size > 50
+    seen = log.q[pressing, 0] - res.q_true[pressing, 0]
+    np.testing.assert_allclose(seen, 0.001 * np.sign(log.tau_cmd[pressing - 1, 0]), atol=1e-4)
+    path = tmp_path / "play.mcap"
+    write_run(path, res.run)
+    read = {b: read_run(path, joint_backlash=b) for b in (None, 0.002)}
+    found = {b: detect_contacts(run.log, run.robot) for b, run in read.items()}
+    assert len(found[None]) == len(found[0.002]) >= 1
+    assert np.array_equal(found[None].index, found[0.002].index)
+    true_q = res.q_true[found[None].index]
+    assert np.abs(found[None].q - true_q).max() > 8e-4      # the play, read as angle
+    assert np.abs(found[0.002].q - true_q).max() < 2e-4     # the links' angles
+
+
 def pushes_across_a_wall() -> list[tuple[float, float]]:
     """Reach toward the wall, then through it, at heights and elbow bends that load the two
     joints in different proportions."""

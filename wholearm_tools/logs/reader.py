@@ -574,6 +574,7 @@ def read_run(
     tip_link: str | None = None,
     package_paths: Sequence[str | os.PathLike[str]] = (),
     joint_compliance: float | Sequence[float] | None = None,
+    joint_backlash: float | Sequence[float] | None = None,
 ) -> Run:
     """Read a run: robot (``robot`` argument or the log's URDF), joint log, ground truth.
 
@@ -591,6 +592,9 @@ def read_run(
     joint_compliance : deflection of each joint's transmission at its effort limit [rad], one
         value or one per joint, for encoders on the motor side (``RobotModel.joint_compliance``;
         default: the robot's, stiff for a URDF)
+    joint_backlash : lost motion of each joint's transmission [rad], one value or one per joint,
+        for encoders on the motor side (``RobotModel.joint_backlash``; default: the robot's,
+        none for a URDF)
     """
     path = Path(path)
     scan = _scan(path, joint_topic, command_topic)
@@ -599,9 +603,11 @@ def read_run(
     log_joints = tuple(state.names) if isinstance(state, JointStateColumns) else ()
     model, ignored = _robot(scan, robot, log_joints, {
         "base_link": base_link, "tip_link": tip_link, "package_paths": tuple(package_paths)})
-    if joint_compliance is not None:
+    drives = {k: v for k, v in (("joint_compliance", joint_compliance),
+                                ("joint_backlash", joint_backlash)) if v is not None}
+    if drives:
         try:
-            model = dataclasses.replace(model, joint_compliance=joint_compliance)
+            model = dataclasses.replace(model, **drives)
         except RobotModelError as exc:
             raise InputError(f"{path}: {exc}") from None
     if ignored:

@@ -258,12 +258,14 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
         what = f"{run.torque_source}: {run.torque_note}" if run.torque_note else \
             plain.get(run.torque_source, run.torque_source)
         lines.append(f"Torque evidence: {what}")
-    compliance = meta.get("joint_compliance")
+    compliance, backlash = meta.get("joint_compliance"), meta.get("joint_backlash")
     if compliance:
-        each = sorted(set(compliance)) if len(set(compliance)) == 1 else compliance
-        lines.append("Transmissions: compliance " + ", ".join(f"{c * 1e3:.3g}" for c in each)
-                     + " mrad at the effort limit"
+        def mrad(values: list[float]) -> str:
+            each = sorted(set(values)) if len(set(values)) == 1 else values
+            return ", ".join(f"{v * 1e3:.3g}" for v in each)
+        lines.append("Transmissions: compliance " + mrad(compliance) + " mrad at the effort limit"
                      + (" (learned from the map)" if meta.get("joint_compliance_std") else "")
+                     + (f", backlash {mrad(backlash)} mrad" if backlash else "")
                      + "; contacts at the links' angles")
     if run.ignored_joints:
         lines.append("Log joints off the arm's chain (not used): "

@@ -24,6 +24,10 @@ from wholearm_tools.errors import InputError, RobotModelError
 
 FloatArray = NDArray[np.float64]
 
+#: torque that turns a drive's motor through its play, as a fraction of its effort limit: the
+#: rotor's and gears' own friction (a few per cent in geared drives)
+PLAY_TORQUE = 0.02
+
 MIN_TIP_DISTANCE = 1e-6
 """Shortest distance [m] from the last joint to the tip: a last link shorter than this has no
 tip to touch with and no axis, and every later stage would divide by its length."""
@@ -73,6 +77,10 @@ class RobotModel:
         Deflection of each joint's transmission at its effort limit [rad] (a drive's torsional
         stiffness ``k`` gives ``effort / k``), for encoders that read the motor side; zeros
         (default) for encoders on the link or stiff drives.  See :meth:`link_angles`.
+    joint_backlash : (n,) float, optional
+        Lost motion of each joint's transmission [rad]: the play between the motor and the
+        link (gearboxes 0.3-4 mrad, harmonic drives about none), for encoders that read the
+        motor side; zeros (default) for encoders on the link or drives without play.
     """
 
     name: str
@@ -87,6 +95,7 @@ class RobotModel:
     velocity_limits: FloatArray
     effort_limits: FloatArray
     joint_compliance: FloatArray | None = None
+    joint_backlash: FloatArray | None = None
     planar: bool = field(init=False)
 
     def __post_init__(self) -> None:
@@ -111,19 +120,24 @@ class RobotModel:
                     raise RobotModelError(f"robot {self.name!r}: a joint axis is zero")
                 value = value / norms[:, None]
             object.__setattr__(self, attr, read_only(value))
-        compliance = np.asarray(0.0 if self.joint_compliance is None else self.joint_compliance,
-                                dtype=float)
-        if compliance.shape not in ((), (1,), (n,)):
-            raise RobotModelError(f"robot {self.name!r}: expected one joint compliance or {n} "
-                                  f"(one per joint), got {compliance.size}")
-        compliance = np.broadcast_to(compliance, (n,))
-        if not np.all(np.isfinite(compliance) & (compliance >= 0)):
-            raise RobotModelError(f"robot {self.name!r}: joint compliance must be finite and "
-                                  f"non-negative [rad at the effort limit], got {compliance}")
-        if np.any((compliance > 0) & ~(np.asarray(self.effort_limits, dtype=float) > 0)):
-            raise RobotModelError(f"robot {self.name!r}: a compliant joint needs a positive "
-                                  "effort limit (its compliance is the deflection there)")
-        object.__setattr__(self, "joint_compliance", read_only(compliance.copy()))
+        drives = (("joint_compliance", "joint compliance", "rad at the effort limit"),
+                  ("joint_backlash", "joint backlash", "rad"))
+        for attr, what, unit in drives:
+            value = np.asarray(0.0 if getattr(self, attr) is None else getattr(self, attr),
+                               dtype=float)
+            if value.shape not in ((), (1,), (n,)):
+                raise RobotModelError(f"robot {self.name!r}: expected one {what} or {n} (one "
+                                      f"per joint), got {value.size}")
+            value = np.broadcast_to(value, (n,))
+            if not np.all(np.isfinite(value) & (value >= 0)):
+                raise RobotModelError(f"robot {self.name!r}: {what} must be finite and "
+                                      f"non-negative [{unit}], got {value}")
+            object.__setattr__(self, attr, read_only(value.copy()))
+        if np.any(((self.joint_compliance > 0) | (self.joint_backlash > 0))
+                  & ~(np.asarray(self.effort_limits, dtype=float) > 0)):
+            raise RobotModelError(f"robot {self.name!r}: a compliant joint or one with play "
+                                  "needs a positive effort limit (its compliance is the "
+                                  "deflection there; its play is crossed at a share of it)")
         if np.any(self.link_radii < 0) or self.tip_radius < 0:
             raise RobotModelError(f"robot {self.name!r}: negative link or tip radius")
         if float(np.linalg.norm(self.tip_offset)) < MIN_TIP_DISTANCE:
@@ -188,15 +202,40 @@ class RobotModel:
 
     def link_angles(self, q: ArrayLike, tau: ArrayLike | None) -> FloatArray:
         """Link-side joint angles from motor-side readings ``q (N, n)`` under the drives'
-        torques ``tau (N, n)``: ``q - c tau / effort`` (each transmission is a torsion spring
-        that deflects by ``c`` at the effort limit).  The geometry of a contact is the links';
-        the detector's signals stay the drives'.  ``q`` itself when the drives are stiff
-        (``joint_compliance`` all zero) or no torque was logged.
+        torques ``tau (N, n)``, rows in time order::
+
+            q - c tau / effort - (b / 2) s
+
+        Each transmission is a torsion spring that deflects by ``c`` at the effort limit, and
+        has a play ``b`` whose gap the drive holds closed on the side it pushes: ``s`` is
+        :meth:`load_direction`.  The geometry of a contact is the links'; the detector's
+        signals stay the drives'.  ``q`` itself when the drives are stiff and without play
+        (``joint_compliance`` and ``joint_backlash`` all zero) or no torque was logged.
         """
-        if tau is None or not np.any(self.joint_compliance > 0):
+        stiff, tight = not np.any(self.joint_compliance > 0), not np.any(self.joint_backlash > 0)
+        if tau is None or (stiff and tight):
             return np.asarray(q, dtype=float)
-        return (np.asarray(q, dtype=float)
-                - np.asarray(tau, dtype=float) * (self.joint_compliance / self.effort_limits))
+        tau = np.asarray(tau, dtype=float)
+        out = np.asarray(q, dtype=float)
+        if not stiff:
+            out = out - tau * (self.joint_compliance / self.effort_limits)
+        if not tight:
+            out = out - 0.5 * self.joint_backlash * self.load_direction(tau)
+        return out
+
+    def load_direction(self, tau: ArrayLike) -> FloatArray:
+        """The side of its play each drive holds closed, ``+1``, ``-1`` or ``0`` (not known
+        yet), over torques ``tau (N, n)`` in time order: the sign of the torque once it
+        exceeds ``PLAY_TORQUE`` of the effort limit (enough to turn the motor through the
+        gap against its own friction), held while the torque stays inside that band."""
+        tau = np.asarray(tau, dtype=float)
+        rows = tau.reshape(-1, self.dof)
+        band = PLAY_TORQUE * self.effort_limits
+        pushed = np.where(rows > band, 1.0, np.where(rows < -band, -1.0, 0.0))
+        last = np.where(pushed != 0, np.arange(len(rows))[:, None], -1)
+        last = np.maximum.accumulate(last, axis=0)
+        held = np.take_along_axis(pushed, np.maximum(last, 0), axis=0)
+        return np.where(last >= 0, held, 0.0).reshape(tau.shape)
 
     # ------------------------------------------------------------------ kinematics
     @property

@@ -61,7 +61,7 @@ from numpy.typing import NDArray
 from wholearm_tools._arrays import read_only
 from wholearm_tools.errors import InputError
 from wholearm_tools.logs.records import GroundTruth, JointLog, Run
-from wholearm_tools.robot.model import RobotModel
+from wholearm_tools.robot.model import PLAY_TORQUE, RobotModel
 from wholearm_tools.sim.collision import Collider, ObstacleLike, surface_dicts
 from wholearm_tools.sim.motion import PolylinePath, synchronised_law
 from wholearm_tools.sim.occupancy import SweptGrid, densify
@@ -114,6 +114,11 @@ class Physics:
         encoders sit on the motor side and read the link's position plus the deflection under
         the torque the drive applies (quasi-static: the torque last commanded); harmonic
         drives deflect 0.5-2 mrad at their rated torque, 0 is a rigid transmission
+    joint_backlash : lost motion of each joint's transmission [rad]: the encoders sit on the
+        motor side, whose play the drive holds closed on the side it pushes once its torque
+        exceeds ``robot.model.PLAY_TORQUE`` of the effort limit; they read the link's position
+        plus or minus half the play (quasi-static: the motor crosses the gap within a step).
+        Spur and planetary gearboxes have 0.3-4 mrad, harmonic drives about none
     log_jitter : a rig's logger does not tick exactly: each interval between log samples is the
         log period times ``1 + e``, ``e`` Gaussian with this standard deviation, and a sample
         is taken at the physics step nearest its time and stamped with it (the state stamps
@@ -137,6 +142,7 @@ class Physics:
     release_time: float = 0.1
     max_deviation: float = 3e-4
     joint_compliance: float = 0.0
+    joint_backlash: float = 0.0
     log_jitter: float = 0.0
     log_drop: float = 0.0
 
@@ -147,7 +153,8 @@ class Physics:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise InputError(f"physics {name} must be positive, got {value}")
-        for name in ("friction", "joint_friction", "armature", "joint_compliance"):
+        for name in ("friction", "joint_friction", "armature", "joint_compliance",
+                     "joint_backlash"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise InputError(f"physics {name} must be >= 0, got {value}")
@@ -270,6 +277,9 @@ class _Rig:
         self._compliance = (physics.joint_compliance / self.effort
                             if physics.joint_compliance > 0 else None)
         self._tau = np.zeros(n)  # torque the drives apply (the transmission's deflection)
+        self._half_play = 0.5 * physics.joint_backlash if physics.joint_backlash > 0 else None
+        self._play_band = PLAY_TORQUE * self.effort
+        self._side = np.zeros(n)  # side of its play each drive holds closed (+1, -1, 0)
         self._per_window = 1.0 / (self.window * self.dt)
         self._hist_len = self.window + 1
         self._neg_effort = -self.effort
@@ -307,6 +317,8 @@ class _Rig:
         noisy = self.data.qpos + self._noise[self._noise_i]
         if self._compliance is not None:
             noisy = noisy + self._compliance * self._tau
+        if self._half_play is not None:
+            noisy = noisy + self._half_play * self._side
         self._noise_i += 1
         return np.round(noisy * self._per_count) * self.quantum
 
@@ -339,6 +351,9 @@ class _Rig:
             self._next_log = self._steps[lg.k] if lg.k < len(self._steps) else -1
         self.data.ctrl[:] = tau
         self._tau = tau
+        if self._half_play is not None:
+            band = self._play_band
+            self._side = np.where(tau > band, 1.0, np.where(tau < -band, -1.0, self._side))
         self._mj_step(self.model, self.data)
         self.step_i += 1
         self._contacts()
