@@ -36,6 +36,7 @@ depend on the machine's cores).
 Run:  .venv/bin/python benchmarks/bench_reconstruct.py [--seeds 0-9] [--scenarios a,b]
       [--engine physics] [--duration 120] [--no-tip-only] [--cache DIR]
       [--joint-compliance 0.001 [--known-compliance | --learn-compliance]]
+      [--joint-backlash 0.002 [--known-drives | --learn-backlash]]
 """
 
 from __future__ import annotations
@@ -219,6 +220,8 @@ def main() -> None:
     ap.add_argument("--learn-compliance", action="store_true",
                     help="learn the drives' compliance from a first map, then reconstruct at "
                          "the links' angles (reconstruct's learn_compliance)")
+    ap.add_argument("--learn-backlash", action="store_true",
+                    help="learn the drives' play likewise (reconstruct's learn_backlash)")
     args = ap.parse_args()
     seeds = seeds_arg(args.seeds)
     warnings.simplefilter("ignore")
@@ -229,7 +232,8 @@ def main() -> None:
         for seed in seeds:
             run = get_run(name, seed, args)
             t0, c0 = time.perf_counter(), time.process_time()
-            rec = reconstruct(run, B=B, workers=1, learn_compliance=args.learn_compliance)
+            rec = reconstruct(run, B=B, workers=1, learn_compliance=args.learn_compliance,
+                              learn_backlash=args.learn_backlash)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             cov = coverage(rec)
             det = determined(rec)

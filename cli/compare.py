@@ -65,7 +65,7 @@ def command(logs: tuple[Path, ...], Bs: tuple[float, ...], out_dir: Path,
     prepare_output_dir(out_dir, list(OUTPUT_NAMES), overwrite)
     read_options = {"joint_topic": joint_topic, "command_topic": command_topic,
                     "require_commands": True, **rig.read_kwargs(maps=True)}
-    learned = {"learn_compliance": True} if rig.learn_compliance else {}
+    learned = rig.learning()
     pairs = len({p.resolve() for p in logs}) * len(set(Bs))
     try:
         if progress_enabled():

@@ -288,29 +288,43 @@ class RigOptions:
     effort: str = "commanded"
     stiffness: tuple[float, ...] | None = None
     compliance: tuple[float, ...] | str | None = None
-    backlash: tuple[float, ...] | None = None
+    backlash: tuple[float, ...] | str | None = None
 
     @property
     def learn_compliance(self) -> bool:
         """``--joint-compliance auto``: learned from the map (``reconstruct``'s option)."""
         return self.compliance == "auto"
 
+    @property
+    def learn_backlash(self) -> bool:
+        """``--joint-backlash auto``: learned from the map (``reconstruct``'s option)."""
+        return self.backlash == "auto"
+
+    def learning(self) -> dict[str, bool]:
+        """``reconstruct``'s keywords for what ``auto`` asks to learn."""
+        return {k: True for k, on in (("learn_compliance", self.learn_compliance),
+                                      ("learn_backlash", self.learn_backlash)) if on}
+
     def read_kwargs(self, *, maps: bool = False) -> dict[str, Any]:
         """The ``read_run`` keywords; ``maps``: the command fits a map (it can learn the
-        compliance; other commands refuse ``--joint-compliance auto``)."""
+        drives; other commands refuse ``--joint-compliance auto``, ``--joint-backlash
+        auto``)."""
         def one_or_each(values: Any) -> Any:
             return values[0] if values and len(values) == 1 else values
 
-        if self.learn_compliance and not maps:
-            raise click.UsageError("--joint-compliance auto learns the compliance from a "
-                                   "fitted map: reconstruct, report and compare take it")
+        for option, what, learn in (("compliance", "compliance", self.learn_compliance),
+                                    ("backlash", "play", self.learn_backlash)):
+            if learn and not maps:
+                raise click.UsageError(f"--joint-{option} auto learns the drives' {what} from "
+                                       "a fitted map: reconstruct, report and compare take it")
         return {"robot": None if self.robot is None else str(self.robot),
                 "base_link": self.base_link, "tip_link": self.tip_link,
                 "package_paths": tuple(str(p) for p in self.package_paths),
                 "effort": self.effort, "stiffness": one_or_each(self.stiffness),
                 "joint_compliance": (None if self.learn_compliance
                                      else one_or_each(self.compliance)),
-                "joint_backlash": one_or_each(self.backlash)}
+                "joint_backlash": (None if self.learn_backlash
+                                   else one_or_each(self.backlash))}
 
 
 def _per_joint(what: str, zero_ok: bool, auto: bool = False
@@ -344,7 +358,7 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
                 tip_link: str | None, package_paths: tuple[Path, ...], effort: str,
                 stiffness: tuple[float, ...] | None,
                 compliance: tuple[float, ...] | str | None,
-                backlash: tuple[float, ...] | None, **kwargs: Any) -> Any:
+                backlash: tuple[float, ...] | str | None, **kwargs: Any) -> Any:
         rig = RigOptions(robot_file, base_link, tip_link, tuple(package_paths), effort,
                          stiffness, compliance, backlash)
         return f(*args, rig=rig, **kwargs)
@@ -375,12 +389,13 @@ def rig_options(f: Callable[..., Any]) -> Callable[..., Any]:
                           "the motor side (effort / torsional stiffness; one value, or one per "
                           "joint): contacts are placed at the links' angles. 'auto' learns it "
                           "from a first map (reconstruct, report, compare). Default: stiff."),
-        click.option("--joint-backlash", "backlash", default=None, metavar="B[,B...]",
-                     callback=_per_joint("non-negative backlash", zero_ok=True),
+        click.option("--joint-backlash", "backlash", default=None, metavar="B[,B...]|auto",
+                     callback=_per_joint("non-negative backlash", zero_ok=True, auto=True),
                      help="Lost motion of each transmission [rad] for encoders on the motor "
                           "side (one value, or one per joint): contacts are placed at the "
                           "links' angles, the play closed on the side each drive pushes. "
-                          "Default: none."),
+                          "'auto' learns it from a first map (reconstruct, report, "
+                          "compare). Default: none."),
     ]
     for option in reversed(options):
         command = option(command)

@@ -115,7 +115,7 @@ def command(run: Path, B: float, out_dir: Path, causal: bool, loss: str, rig: Ri
         check_B(B, data.robot, what="--B")
         with stage(f"reconstructing with B = {B:g} m") as step:
             rec = reconstruct(data, B=B, causal=causal, loss=loss, workers=workers,
-                              learn_compliance=rig.learn_compliance, progress=step)
+                              progress=step, **rig.learning())
         if not rec.surface_map.primitives:
             reason = "; ".join(rec.messages) or "no primitive explains the contacts"
             raise click.ClickException(f"{run}: nothing could be fitted ({reason})")

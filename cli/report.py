@@ -129,7 +129,7 @@ def _from_log(run: Path, output: Path, *, B: float, causal: bool, loss: str, rig
     check_B(B, data.robot, what="--B")
     with stage(f"reconstructing with B = {B:g} m") as step:
         rec = reconstruct(data, B=B, causal=causal, loss=loss,
-                          learn_compliance=rig.learn_compliance, progress=step)
+                          progress=step, **rig.learning())
     folder = output.parent if str(output.parent) else Path(".")
     sm = map_with_provenance(rec.surface_map, folder, run, "log", reconstruction_parameters(rec))
     record = sm.meta["input"]

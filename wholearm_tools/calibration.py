@@ -1,18 +1,18 @@
-"""The drives' compliance learned from a run's own map.
+"""The drives' compliance and backlash learned from a run's own map.
 
-Encoders on the motor side of compliant drives read a blocked joint's angle plus the
-transmission's deflection, ``c tau / effort`` (``RobotModel.link_angles``).  A map fitted at the
-readings then carries the deflection: a surface touched in poses that load the joints
-differently is read at depths that differ by the difference of the deflections.  That is what
-makes ``c`` observable: the contacts a reported primitive explains are re-read at
-``q - c tau / effort`` and ``c`` is fitted jointly with every primitive's parameters, so that
-the readings lie on their surfaces (a calibration of the arm against the surfaces it
-touched).  A joint whose torque hardly varies between the contacts of one surface leaves its
-own ``c`` undetermined, so ``c`` is the arm's common compliance plus each joint's departure
-from it, under Gaussian priors (``prior`` on the common part, the range of harmonic drives;
-``spread`` on the departures: drives sized to their loads deflect alike at their effort
-limits).  The stops' own torque ramps do not serve: the deflection builds up during the
-impact, whose motion dominates the reading (docs/method.md).
+Encoders on the motor side of geared drives read a blocked joint's angle plus the
+transmission's deflection, ``c tau / effort``, and half its play on the side the drive pushes,
+``(b / 2) s`` (``RobotModel.link_angles``).  A map fitted at the readings then carries both: a
+surface touched in poses that load the joints differently is read at depths that differ by
+the difference of the offsets.  That is what makes ``c`` and ``b`` observable: the contacts a
+reported primitive explains are re-read at the links' angles and the drives' parameters are
+fitted jointly with every primitive's, so that the readings lie on their surfaces (a
+calibration of the arm against the surfaces it touched).  A joint whose load hardly varies
+between the contacts of one surface leaves its own value undetermined, so each is the arm's
+common value plus each joint's departure from it, under Gaussian priors (:data:`PRIORS`).
+Compliance and play differ where a joint's torque does: a joint pushing at its effort limit
+shows their sum.  The stops' own torque ramps do not serve: the deflection builds up during
+the impact, whose motion dominates the reading (docs/method.md).
 """
 
 from __future__ import annotations
@@ -27,28 +27,40 @@ from wholearm_tools.errors import InputError
 
 FloatArray = NDArray[np.float64]
 
-#: the prior's scale [rad at the effort limit]: harmonic drives deflect 0.5-2 mrad at rated torque
-DEFAULT_PRIOR = 0.002
-#: how far one joint's drive may depart from the arm's common compliance, a priori [rad]
-DEFAULT_SPREAD = 0.0005
+#: priors [rad]: scale of the arm's common value, and how far one joint's drive may depart from
+#: it (drives sized to their loads deflect alike at their effort limits, and gearboxes of one
+#: series have alike play): harmonic drives deflect 0.5-2 mrad at rated torque; spur and
+#: planetary gearboxes have 0.3-4 mrad of play
+PRIORS = {"compliance": (0.002, 0.0005), "backlash": (0.002, 0.0005)}
+#: what a drive's parameter means, for messages
+UNITS = {"compliance": "mrad at the effort limit", "backlash": "mrad of play"}
 
 
 @dataclass(frozen=True)
-class ComplianceEstimate:
-    """``compliance (n,)`` [rad at the effort limit] with its standard error ``std (n,)``, from
-    ``readings`` contacts on ``primitives`` reported primitives (``compliance`` is zero and
-    ``std`` infinite where there was nothing to learn from)."""
+class DriveEstimate:
+    """The drives' ``compliance (n,)`` [rad at the effort limit] and ``backlash (n,)`` [rad]
+    with their standard errors ``compliance_std``, ``backlash_std`` (infinite for what was not
+    learned: it keeps the robot's value), from ``readings`` contacts on ``primitives``
+    reported primitives; ``learned`` names what was learned (nothing where there was nothing
+    to learn from)."""
 
     compliance: FloatArray
-    std: FloatArray
+    compliance_std: FloatArray
+    backlash: FloatArray
+    backlash_std: FloatArray
     readings: int
     primitives: int
+    learned: tuple[str, ...]
 
     def describe(self) -> str:
-        mrad = ", ".join(f"{c * 1e3:.2f} ± {s * 1e3:.2f}"
-                         for c, s in zip(self.compliance, self.std, strict=True))
-        return (f"the drives' compliance learned from {self.readings} contacts on "
-                f"{self.primitives} primitives: {mrad} mrad at the effort limit")
+        parts = []
+        for what in self.learned:
+            values, std = getattr(self, what), getattr(self, f"{what}_std")
+            mrad = ", ".join(f"{v * 1e3:.2f} ± {e * 1e3:.2f}"
+                             for v, e in zip(values, std, strict=True))
+            parts.append(f"{what} {mrad} {UNITS[what]}")
+        return (f"the drives' {' and '.join(self.learned)} learned from {self.readings} "
+                f"contacts on {self.primitives} primitives: " + "; ".join(parts))
 
 
 def settled_values(contacts: Any, log: Any, values: FloatArray) -> FloatArray:
@@ -95,34 +107,45 @@ class _Layout:
         return out
 
 
-def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
-                        spread: float = DEFAULT_SPREAD) -> ComplianceEstimate:
-    """The drives' compliance that puts ``rec``'s contacts on its reported primitives.
+def estimate_drives(rec: Any, *, compliance: bool = True,
+                    backlash: bool = False) -> DriveEstimate:
+    """The drives' compliance and/or backlash that put ``rec``'s contacts on its reported
+    primitives (what is not learned keeps the robot's value).
 
     ``rec`` is a :class:`~wholearm_tools.pipeline.Reconstruction`, made at the readings or
-    under a compliance (its contacts are then read back to the drives' angles first).  Each
+    under a drive model (its contacts are then read back to the drives' angles first).  Each
     contact on a reported primitive keeps the reading the fit explained it by (its tip
-    sphere or its link's side, on the map's link); ``c`` and the primitives' parameters
-    minimise the Huber cost of those readings' clearances plus the priors on the
-    common compliance and each joint's departure from it, in units of the map's noise level,
-    with ``c >= 0``.
+    sphere or its link's side, on the map's link) and is re-read at the links' angles
+    ``q - c tau / effort - (b / 2) s`` (``RobotModel.link_angles``; ``tau`` and the pushed side
+    ``s`` where it settled).  ``c``, ``b`` and the primitives' parameters minimise the Huber
+    cost of those readings' clearances plus the priors on each quantity's common value and
+    each joint's departure from it (:data:`PRIORS`), in units of the map's noise level, with
+    ``c, b >= 0``.
     """
     from scipy.optimize import least_squares
 
     run, table, contacts = rec.run, rec.table, rec.contacts
     robot = run.robot
     n, dim = robot.dof, robot.dim
-    none = ComplianceEstimate(np.zeros(n), np.full(n, np.inf), 0, 0)
-    if run.log.tau_cmd is None or not rec.fits:
+    known = {"compliance": robot.joint_compliance, "backlash": robot.joint_backlash}
+    learn = tuple(k for k, on in (("compliance", compliance), ("backlash", backlash)) if on)
+    none = DriveEstimate(known["compliance"], np.full(n, np.inf), known["backlash"],
+                         np.full(n, np.inf), 0, 0, ())
+    if run.log.tau_cmd is None or not rec.fits or not learn:
         return none
     rows = np.flatnonzero(np.asarray(table.primitive) >= 0)
-    if len(rows) <= n:
+    if len(rows) <= n * len(learn):
         return none
     tau = np.asarray(run.log.tau_cmd)
-    per_effort = settled_values(contacts, run.log, tau)[rows] / robot.effort_limits
-    # the drives' readings, less a play that is known (a map made under a compliance has its
-    # contacts at the links')
-    q0 = np.asarray(contacts.q)[rows] + robot.joint_compliance * per_effort
+    regressor = {
+        "compliance": settled_values(contacts, run.log, tau)[rows] / robot.effort_limits,
+        "backlash": 0.5 * settled_values(contacts, run.log, robot.load_direction(tau))[rows],
+    }
+    # the drives' readings less what is told (contacts of a map made under a drive model are
+    # at the links' angles)
+    q0 = np.asarray(contacts.q)[rows]
+    for what in learn:
+        q0 = q0 + known[what] * regressor[what]
     tip = np.asarray(table.used_as_tip)[rows]
     link = np.asarray(table.link_by_map)[rows]
     link = np.where(link >= 0, link, np.asarray(table.link)[rows])
@@ -133,11 +156,12 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
     layout = _Layout(rec.fits)
     pick = np.arange(len(rows))
 
-    def clearances(x: FloatArray) -> FloatArray:
-        a_all, b_all = robot.link_segments(q0 - x[:n] * per_effort)
+    def clearances(drives: FloatArray, params: FloatArray) -> FloatArray:
+        q = q0 - sum(drives[i] * regressor[what] for i, what in enumerate(learn))
+        a_all, b_all = robot.link_segments(q)
         a, b = a_all[pick, link, :dim], b_all[pick, link, :dim]
         out = np.empty(len(rows))
-        for j, p in enumerate(layout.primitives(x[n:])):
+        for j, p in enumerate(layout.primitives(params)):
             on = prim == j
             at_tip, side = on & tip, on & ~tip
             if np.any(at_tip):
@@ -148,30 +172,39 @@ def estimate_compliance(rec: Any, *, prior: float = DEFAULT_PRIOR,
 
     noise = max(float(rec.surface_map.meta.get("noise") or 0.0), 1e-6)
 
-    # c = the arm's common compliance + each joint's departure from it (drives sized to
-    # their loads deflect alike at their effort limits): y = [common, departures, params]
-    to_c = np.hstack([np.ones((n, 1)), np.eye(n)])
+    # each learned quantity = the arm's common value + each joint's departure from it:
+    # y = [common, departures] per quantity, then the primitives' parameters
+    m = len(learn) * (n + 1)
+    to_joint = np.hstack([np.ones((n, 1)), np.eye(n)])
+    prior = np.concatenate([[PRIORS[w][0]] + [PRIORS[w][1]] * n for w in learn])
 
-    def c_of(y: FloatArray) -> FloatArray:
-        return np.maximum(to_c @ y[:n + 1], 0.0)
+    def drives_of(y: FloatArray) -> FloatArray:
+        return np.maximum(y[:m].reshape(len(learn), n + 1) @ to_joint.T, 0.0)
 
     def cost(y: FloatArray) -> FloatArray:
         try:
-            r = clearances(np.concatenate([c_of(y), y[n + 1:]]))
+            r = clearances(drives_of(y), y[m:])
         except InputError:          # a step to an impossible primitive (a negative radius)
             r = np.full(len(rows), 1.0)
-        return np.concatenate([r, [y[0] / prior * noise], y[1:n + 1] / spread * noise])
+        return np.concatenate([r, y[:m] / prior * noise])
 
-    y0 = np.concatenate([np.zeros(n + 1), layout.x0])
-    lower = np.concatenate([[0.0], np.full(n + len(layout.x0), -np.inf)])
-    scale = np.concatenate([np.full(n + 1, prior), np.full(len(layout.x0), 10 * noise)])
+    y0 = np.concatenate([np.zeros(m), layout.x0])
+    common = np.zeros(m, dtype=bool)
+    common[::n + 1] = True
+    lower = np.concatenate([np.where(common, 0.0, -np.inf), np.full(len(layout.x0), -np.inf)])
+    scale = np.concatenate([prior, np.full(len(layout.x0), 10 * noise)])
     sol = least_squares(cost, y0, loss="huber", f_scale=3 * noise, bounds=(lower, np.inf),
                         x_scale=scale, diff_step=1e-6)
     jac = np.asarray(sol.jac)
-    c = c_of(sol.x)
-    r = clearances(np.concatenate([c, sol.x[n + 1:]]))
+    drives = drives_of(sol.x)
+    r = clearances(drives, sol.x[m:])
     s = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-6)
     cov = np.linalg.pinv(jac.T @ jac) * s * s
-    cov_c = to_c @ cov[:n + 1, :n + 1] @ to_c.T
-    std = np.sqrt(np.maximum(np.diag(cov_c), 0.0))
-    return ComplianceEstimate(c, std, len(rows), len(rec.fits))
+    values = dict(known)
+    std = {w: np.full(n, np.inf) for w in known}
+    for i, what in enumerate(learn):
+        block = slice(i * (n + 1), (i + 1) * (n + 1))
+        values[what] = drives[i]
+        std[what] = np.sqrt(np.maximum(np.diag(to_joint @ cov[block, block] @ to_joint.T), 0.0))
+    return DriveEstimate(values["compliance"], std["compliance"], values["backlash"],
+                         std["backlash"], len(rows), len(rec.fits), learn)

@@ -22,7 +22,7 @@ from wholearm_tools.logs.records import Run
 from wholearm_tools.mapfile import MappedPrimitive, SurfaceMap
 from wholearm_tools.robot.model import RobotModel
 
-#: most maps ``learn_compliance`` makes (the first at the readings)
+#: most maps learning the drives makes (the first at the readings)
 LEARNING_PASSES = 3
 
 #: primitive types tried by fit-and-grow, by workspace dimension
@@ -42,10 +42,10 @@ class ReconstructParams:
     use_sweep : score hypotheses against the B-dilated swept map (the free-space term)
     workers : processes for the seed fits (None: every core, at most 8); the map does not
         depend on it
-    learn_compliance : learn the drives' compliance from a first map made at the readings
-        (:func:`wholearm_tools.calibration.estimate_compliance`), then reconstruct at the
-        links' angles; for encoders on the motor side of drives whose stiffness is not known
-        (the robot must be stiff: a known compliance is given on the robot instead)
+    learn_compliance, learn_backlash : learn the drives' compliance, play, from a first map
+        made at the readings (:func:`wholearm_tools.calibration.estimate_drives`), then
+        reconstruct at the links' angles; for encoders on the motor side of drives whose
+        stiffness, play is not known (a known one is given on the robot instead)
     """
 
     B: float = 0.02
@@ -57,6 +57,7 @@ class ReconstructParams:
     use_sweep: bool = True
     workers: int | None = None
     learn_compliance: bool = False
+    learn_backlash: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.B) and self.B > 0):
@@ -504,42 +505,48 @@ def reconstruct(run: Run, B: float = 0.02, *, progress: Callable[[str], None] | 
     """
     params = ReconstructParams(B=B, **options)
     with one_blas_thread():
-        if not params.learn_compliance:
+        if not (params.learn_compliance or params.learn_backlash):
             return _reconstruct(run, params, progress)
-        return _learning_compliance(run, params, progress)
+        return _learning_drives(run, params, progress)
 
 
-def _learning_compliance(run: Run, params: ReconstructParams,
-                         progress: Callable[[str], None] | None) -> Reconstruction:
-    """The map at the readings, then in turn the compliance that puts the map's contacts on
-    its primitives and the map again at the links' angles under it: a map made at a closer
-    compliance holds more of the contacts, which tell the compliance better.  Stops when the
-    compliance moves by less than its standard error, after at most
-    :data:`LEARNING_PASSES` maps."""
-    from wholearm_tools.calibration import estimate_compliance
+def _learning_drives(run: Run, params: ReconstructParams,
+                     progress: Callable[[str], None] | None) -> Reconstruction:
+    """The map at the readings, then in turn the drives' compliance and/or play that put the
+    map's contacts on its primitives and the map again at the links' angles under them: a
+    map made at a closer drive model holds more of the contacts, which tell the model
+    better.  Stops when every learned value moves by less than its standard error, after at
+    most :data:`LEARNING_PASSES` maps."""
+    from wholearm_tools.calibration import estimate_drives
 
-    if np.any(run.robot.joint_compliance > 0):
-        raise InputError("the drives' compliance is given: it cannot be learned as well")
+    learn = {"compliance": params.learn_compliance, "backlash": params.learn_backlash}
+    for what, on in learn.items():
+        if on and np.any(getattr(run.robot, f"joint_{what}") > 0):
+            raise InputError(f"the drives' {what} is given: it cannot be learned as well")
     rec = _reconstruct(run, params, progress)
     timings = dict(rec.timings)
     estimate = None
     for _ in range(LEARNING_PASSES - 1):
-        new = estimate_compliance(rec)
+        new = estimate_drives(rec, **learn)
         if not new.readings:
             break
-        moved = (estimate is None
-                 or np.any(np.abs(new.compliance - estimate.compliance) > new.std))
+        moved = estimate is None or any(
+            np.any(np.abs(getattr(new, w) - getattr(estimate, w)) > getattr(new, f"{w}_std"))
+            for w in new.learned)
         estimate = new
         if not moved:
             break
-        robot = dataclasses.replace(run.robot, joint_compliance=estimate.compliance)
+        robot = dataclasses.replace(run.robot, joint_compliance=estimate.compliance,
+                                    joint_backlash=estimate.backlash)
         rec = _reconstruct(dataclasses.replace(run, robot=robot), params, progress)
         timings = {k: timings.get(k, 0.0) + v for k, v in rec.timings.items()}
     if estimate is None:
+        what = " and ".join(w for w, on in learn.items() if on)
         return dataclasses.replace(rec, messages=(
-            *rec.messages, "the drives' compliance was not learned: no reported primitive "
+            *rec.messages, f"the drives' {what} was not learned: no reported primitive "
             "holds the contacts it would be learned from"))
-    meta = {**rec.surface_map.meta, "joint_compliance_std": estimate.std.tolist()}
+    meta = {**rec.surface_map.meta, **{f"joint_{w}_std": getattr(estimate, f"{w}_std").tolist()
+                                       for w in estimate.learned}}
     return dataclasses.replace(
         rec, surface_map=dataclasses.replace(rec.surface_map, meta=meta), timings=timings,
         messages=(*rec.messages, estimate.describe()))
@@ -572,8 +579,7 @@ def _reconstruct(run: Run, params: ReconstructParams,
     meta = {"source": run.source, "causal": params.causal, "duration": run.log.duration}
     if q_link is not run.log.q:
         meta["joint_compliance"] = run.robot.joint_compliance.tolist()
-        if np.any(run.robot.joint_backlash > 0):
-            meta["joint_backlash"] = run.robot.joint_backlash.tolist()
+        meta["joint_backlash"] = run.robot.joint_backlash.tolist()
     if len(table) == 0:
         surface_map = SurfaceMap(planar=run.robot.planar, B=params.B, primitives=(),
                                  contacts={"count": 0}, meta=meta,

@@ -62,6 +62,15 @@ def test_report_with_truth_opens_with_the_answer(planar_rec, tmp_path):
     text = "\n".join(report_pdf.summary_lines(data, info.accuracy, None))
     assert (f"Links: {len(t) - 1} named by the joint signals alone, 1 left among the links "
             "of a rigid group (the named link's probability 0.60-0.60;") in text
+    assert "Transmissions" not in text      # stiff drives without play: nothing to say
+    # the field engineer reads which drive model placed the contacts, and what was learned
+    drives = {**planar_rec.surface_map.meta, "joint_compliance": [0.001, 0.001],
+              "joint_backlash": [0.002, 0.003], "joint_backlash_std": [1e-4, 1e-4]}
+    data = dataclasses.replace(data, surface_map=dataclasses.replace(data.surface_map,
+                                                                     meta=drives))
+    text = "\n".join(report_pdf.summary_lines(data, info.accuracy, None))
+    assert ("Transmissions: compliance 1 mrad at the effort limit, backlash 2, 3 mrad (learned "
+            "from the map); contacts at the links' angles") in text
 
 
 def test_report_without_truth_has_no_accuracy(planar_rec, tmp_path):

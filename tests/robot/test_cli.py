@@ -76,7 +76,11 @@ def test_rig_options_reach_read_run() -> None:
     assert learn.read_kwargs(maps=True)["joint_compliance"] is None
     res = run("contacts", __file__, "--B", "0.02", "--joint-compliance", "auto")
     assert res.exit_code == 2
-    assert "--joint-compliance auto learns the compliance from a fitted map" in res.output
+    assert "--joint-compliance auto learns the drives' compliance from a fitted map" in res.output
+    assert RigOptions(backlash="auto").learning() == {"learn_backlash": True}
+    res = run("contacts", __file__, "--B", "0.02", "--joint-backlash", "auto")
+    assert res.exit_code == 2
+    assert "--joint-backlash auto learns the drives' play from a fitted map" in res.output
 
 
 def test_robot_with_a_log_takes_the_branch_it_drives(mesh_urdf: Path, tmp_path) -> None:

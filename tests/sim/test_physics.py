@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -247,7 +248,7 @@ def test_the_drives_compliance_is_learned_from_the_wall_the_arm_pressed() -> Non
     differ by the deflections.  Learned from the map, the compliance comes within 0.3 mrad of
     the 2 mrad simulated, and the wall, 0.8 mm off at the readings, comes back within 0.2 mm;
     a stiff arm learns next to none."""
-    from wholearm_tools.calibration import estimate_compliance
+    from wholearm_tools.calibration import estimate_drives
     from wholearm_tools.pipeline import reconstruct
 
     robot = two_link()
@@ -256,7 +257,7 @@ def test_the_drives_compliance_is_learned_from_the_wall_the_arm_pressed() -> Non
         res = run_scripted(robot, wall(0.55), pushes_across_a_wall(), home=(1.0, 0.0),
                            physics=Physics(joint_compliance=compliance), duration=40.0)
         read = reconstruct(res.run, B=0.02, workers=1)
-        learned = estimate_compliance(read)
+        learned = estimate_drives(read)
         assert learned.readings >= 6
         np.testing.assert_allclose(learned.compliance, compliance, atol=3e-4)
         if not compliance:
@@ -265,7 +266,7 @@ def test_the_drives_compliance_is_learned_from_the_wall_the_arm_pressed() -> Non
         np.testing.assert_allclose(rec.surface_map.meta["joint_compliance"], compliance,
                                    atol=3e-4)
         # a fixed point: the map made under the learned compliance tells the same compliance
-        np.testing.assert_allclose(estimate_compliance(rec).compliance,
+        np.testing.assert_allclose(estimate_drives(rec).compliance,
                                    rec.surface_map.meta["joint_compliance"], atol=1e-4)
         off = [np.abs(r.surface_map.primitives[0].primitive.signed_distance(on_wall)).max()
                for r in (read, rec)]
@@ -552,3 +553,33 @@ def test_a_tiled_junction_stays_within_its_deviation_of_the_ideal_bores() -> Non
     away = from_lip > clearance + 0.02
     assert away.sum() > 30
     np.testing.assert_allclose(got[away], clearance[away], atol=dev + 1e-6)
+
+
+def test_the_drives_play_is_learned_from_the_wall_the_arm_pressed() -> None:
+    """Pressed with the elbow bent either way, one wall is read at depths that differ by the
+    play closed on opposite sides.  Learned from the map, the play comes within 0.3 mrad of
+    the 2 mrad simulated and the wall comes back within 0.2 mm; told the play instead, the
+    learning refuses to learn it again."""
+    from wholearm_tools.calibration import estimate_drives
+    from wholearm_tools.pipeline import reconstruct
+
+    robot = two_link()
+    on_wall = np.array([[0.55, -0.3], [0.55, 0.0], [0.55, 0.3]])
+    res = run_scripted(robot, wall(0.55), pushes_across_a_wall(), home=(1.0, 0.0),
+                       physics=Physics(joint_backlash=0.002), duration=40.0)
+    read = reconstruct(res.run, B=0.02, workers=1)
+    learned = estimate_drives(read, compliance=False, backlash=True)
+    assert learned.learned == ("backlash",)
+    assert learned.readings >= 6
+    np.testing.assert_allclose(learned.backlash, 0.002, atol=3e-4)
+    np.testing.assert_array_equal(learned.compliance, 0.0)     # not learned: the robot's
+    rec = reconstruct(res.run, B=0.02, workers=1, learn_backlash=True)
+    np.testing.assert_allclose(rec.surface_map.meta["joint_backlash"], 0.002, atol=3e-4)
+    off = [np.abs(r.surface_map.primitives[0].primitive.signed_distance(on_wall)).max()
+           for r in (read, rec)]
+    assert off[0] > 5e-4     # read at the drives' angles
+    assert off[1] < 2e-4     # at the links'
+    assert "backlash learned from" in rec.messages[-1]
+    told = dataclasses.replace(res.run, robot=dataclasses.replace(robot, joint_backlash=0.002))
+    with pytest.raises(InputError, match="backlash is given"):
+        reconstruct(told, B=0.02, workers=1, learn_backlash=True)

@@ -258,15 +258,16 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
         what = f"{run.torque_source}: {run.torque_note}" if run.torque_note else \
             plain.get(run.torque_source, run.torque_source)
         lines.append(f"Torque evidence: {what}")
-    compliance, backlash = meta.get("joint_compliance"), meta.get("joint_backlash")
-    if compliance:
-        def mrad(values: list[float]) -> str:
+    drives = []
+    for what, unit in (("compliance", " at the effort limit"), ("backlash", "")):
+        values = meta.get(f"joint_{what}") or []
+        learned = bool(meta.get(f"joint_{what}_std"))
+        if any(values) or learned:
             each = sorted(set(values)) if len(set(values)) == 1 else values
-            return ", ".join(f"{v * 1e3:.3g}" for v in each)
-        lines.append("Transmissions: compliance " + mrad(compliance) + " mrad at the effort limit"
-                     + (" (learned from the map)" if meta.get("joint_compliance_std") else "")
-                     + (f", backlash {mrad(backlash)} mrad" if backlash else "")
-                     + "; contacts at the links' angles")
+            drives.append(f"{what} " + ", ".join(f"{v * 1e3:.3g}" for v in each) + f" mrad{unit}"
+                          + (" (learned from the map)" if learned else ""))
+    if drives:
+        lines.append("Transmissions: " + ", ".join(drives) + "; contacts at the links' angles")
     if run.ignored_joints:
         lines.append("Log joints off the arm's chain (not used): "
                      + ", ".join(run.ignored_joints))
