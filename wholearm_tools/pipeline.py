@@ -570,9 +570,8 @@ def _reconstruct(run: Run, params: ReconstructParams,
     table = contact_table(run.robot, contacts, classification)
     clock = time.perf_counter()
     # where the links were (the drives' readings less the transmissions' deflection and
-    # play); the
-    # resolution of a contact is the encoders' (a deflection subtracted from the torques is
-    # no quantised reading: its rest would show no noise)
+    # play); the resolution of a contact is the encoders' (a deflection subtracted from the
+    # torques is no quantised reading: its rest would show no noise)
     q_link = run.robot.link_angles(run.log.q, run.log.tau_cmd)
     hints = free_space_hints(run.robot, q_link, params.free_hints)
     floor = position_noise_floor(run.robot, np.asarray(run.log.q))
