@@ -137,10 +137,13 @@ def estimate_drives(rec: Any, *, compliance: bool = True,
     if len(rows) <= n * len(learn):
         return none
     tau = np.asarray(run.log.tau_cmd)
-    regressor = {
-        "compliance": settled_values(contacts, run.log, tau)[rows] / robot.effort_limits,
-        "backlash": 0.5 * settled_values(contacts, run.log, robot.load_direction(tau))[rows],
+    # what each learned quantity moves a contact's angles by, per unit, where it settled
+    regressors = {
+        "compliance": lambda: settled_values(contacts, run.log, tau)[rows] / robot.effort_limits,
+        "backlash": lambda: 0.5 * settled_values(contacts, run.log,
+                                                 robot.load_direction(tau))[rows],
     }
+    regressor = {what: regressors[what]() for what in learn}
     # the drives' readings less what is told (contacts of a map made under a drive model are
     # at the links' angles)
     q0 = np.asarray(contacts.q)[rows]
