@@ -164,6 +164,24 @@ def test_a_joint_the_contact_holds_back_without_stopping_it_names_the_link():
         assert c.qd_before[0, 2] > 0.3
 
 
+@pytest.mark.parametrize("creep", [-0.1, -0.025])
+def test_a_joint_the_contact_back_drives_names_the_link_whatever_the_approach_read(creep):
+    """The tip touches and the arm slides for 0.3 s, the wrist already pushed back, before
+    shoulder and elbow stop; the wrist creeps on, pushed back at the same speed: 0.1 rad/s, or
+    about its velocity threshold, so that it is at rest for moments too short to count as a
+    stop.  The approach is read inside the slide, so the wrist's motion did not change from
+    it, yet it never moves along its load: the contact drives it, and its link is the one in
+    contact."""
+    for seed in range(3):
+        log = impedance_log([([0.6, 0.5, 0.4], {2: 0.35})], slide=(0.3, [0.1, 0.1, creep]),
+                            creep=creep, seed=seed)
+        c = detect_contacts(log)
+        assert c.link.tolist() == [2]
+        assert c.qd_before[0, 2] < 0  # the approach read is the slide's, wrist pushed back
+        if creep > -0.05:
+            assert abs(c.velocity_threshold[2] - abs(creep)) < 0.2 * abs(creep)
+
+
 def test_a_joint_at_rest_the_contact_sets_moving_names_the_link():
     """Shoulder and elbow move, the wrist holds still; the tip touches, the inner joints
     stop, and the contact pushes the wrist into motion at 0.3 rad/s against its controller.

@@ -548,23 +548,40 @@ def _stop_torques(tau: FloatArray, stopped: NDArray[np.bool_], saturated: NDArra
 
 
 def _changed_motion_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: FloatArray,
-                         qd_before: FloatArray, v_th: FloatArray, min_len: int) -> int:
-    """The link of event ``e``, or the outermost joint whose motion the contact changes without
-    stopping it, if that lies outward.  Such a joint moves on while the contact holds the inner
-    ones (friction in the joint or at the contact, a compliant contact, a slide), loaded beyond
-    the free-motion model most of that time, and from the moment the event settles at a
-    velocity that differs from the one that led into the contact (``qd_before``) by more than
-    half of it and more than its threshold ``v_th``: held back, slowed or reversed by the
-    impact, or, at rest before, pushed into motion against its controller.  A joint that runs
-    on at its own speed and is brought to rest by its controller afterwards (its torque beyond
-    the model as the inner joints stop: its coupled inertia changed) was not moved by the
-    contact, and the contact is inward of it."""
+                         qd_before: FloatArray, v_th: FloatArray, min_len: int,
+                         held_back: NDArray[np.bool_]) -> int:
+    """The link of event ``e``, or the outermost joint the contact loads without it counting as
+    obstructed, if that lies outward.  Such a joint is not held at rest under load for a whole
+    stop (friction in the joint or at the contact, a compliant contact, a slide), and from the
+    moment the event settles either
+
+    * moves, loaded beyond the free-motion model most of that time, at a velocity that differs
+      from the one that led into the contact (``qd_before``) by more than half of it and more
+      than its threshold ``v_th``: held back, slowed or reversed by the impact, or, at rest
+      before, pushed into motion against its controller; or
+    * is still held back where the stop ends (``held_back``: loaded beyond its friction and
+      not moving along the load, at rest or driven against it, for a stop's length at
+      least).  A load that does negative work, or none while it exceeds the joint's
+      friction, comes from outside: in free motion only inertia could, and by the end of the
+      stop the inner joints have long been at rest and the joint's own transient is over (a
+      joint braked to rest by its controller is at rest unloaded by then).  The contact
+      holds or back-drives the joint (a tip creeping along a wall against a wrist that pushes
+      it on, at speeds about its velocity threshold, in and out of rest), so it lies on the
+      joint's link or beyond.  This needs no ``qd_before``: a creep that began before the
+      obstruction was confirmed has already changed the motion that led into it.
+
+    A joint that runs on at its own speed and is brought to rest by its controller afterwards
+    (its torque beyond the model as the inner joints stop: its coupled inertia changed) was not
+    moved by the contact, and the contact is inward of it."""
     k, end = e.settle, e.end
     held_for = max(end - k, 1)
-    loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= max(min_len, 0.5 * held_for)
+    most = max(min_len, 0.5 * held_for)
+    loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= most
     after = np.median(qd_s[k:min(k + min_len, end)], axis=0)
     changed = np.abs(after - qd_before) > np.maximum(0.5 * np.abs(qd_before), v_th)
-    return max([int(e.link), *np.flatnonzero(loaded & changed).tolist()])
+    last = max(k, end - min_len)   # the stop's last samples
+    back = np.count_nonzero(held_back[last:end], axis=0) >= max(1.0, 0.5 * (end - last))
+    return max([int(e.link), *np.flatnonzero((loaded & changed) | back).tolist()])
 
 
 def _rigid_group(link: int, travel: FloatArray, resolution: FloatArray,
@@ -667,6 +684,11 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
     # back): a joint the contact loads without stopping it (:func:`_changed_motion_link`)
     loaded_moving = np.stack([ev.drop_short(~stopped[:, j] & ~free_moving[:, j], min_len)
                               for j in range(n)], axis=1)
+    # held back: loaded beyond its friction and not moving along the load (at rest, or driven
+    # against it), for a stop's length at least (:func:`_changed_motion_link`)
+    held_back = np.stack([ev.drop_short(loaded[:, j] & (stopped[:, j] | (resid[:, j] * qd_s[:, j]
+                                                                         < 0.0)), min_len)
+                          for j in range(n)], axis=1)
     events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": fm.rest_scale.tolist(),
             "sigma_torque_motion": fm.scale.tolist(),
@@ -712,7 +734,8 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         held[i] = (at_rest & np.all(stopped[h0:h1], axis=0) & ~np.any(loaded[h0:h1], axis=0))
         peak[i], _ = _stop_torques(resid, stopped, saturated, k_, max(e.end, k_ + 1),
                                    out_qd[i] != 0, held[i], h1, 5 * nb, fm.scale)
-        e = replace(e, link=_changed_motion_link(e, loaded_moving, qd_s, out_qd[i], v_th, min_len))
+        e = replace(e, link=_changed_motion_link(e, loaded_moving, qd_s, out_qd[i], v_th, min_len,
+                                                   held_back))
         links[i] = e.link
         if params.rigid_outer:
             if by_map:
