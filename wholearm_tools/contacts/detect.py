@@ -686,8 +686,8 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
                               for j in range(n)], axis=1)
     # held back: loaded beyond its friction and not moving along the load (at rest, or driven
     # against it), for a stop's length at least (:func:`_changed_motion_link`)
-    held_back = np.stack([ev.drop_short(loaded[:, j] & (stopped[:, j] | (resid[:, j] * qd_s[:, j]
-                                                                         < 0.0)), min_len)
+    not_along = stopped | (resid * qd_s < 0.0)
+    held_back = np.stack([ev.drop_short(loaded[:, j] & not_along[:, j], min_len)
                           for j in range(n)], axis=1)
     events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": fm.rest_scale.tolist(),
