@@ -138,12 +138,13 @@ def estimate_drives(rec: Any, *, compliance: bool = True,
         return none
     tau = np.asarray(run.log.tau_cmd)
     # what each learned quantity moves a contact's angles by, per unit, where it settled
-    regressors = {
-        "compliance": lambda: settled_values(contacts, run.log, tau)[rows] / robot.effort_limits,
-        "backlash": lambda: 0.5 * settled_values(contacts, run.log,
-                                                 robot.load_direction(tau))[rows],
-    }
-    regressor = {what: regressors[what]() for what in learn}
+    regressor = {}
+    if "compliance" in learn:
+        regressor["compliance"] = (settled_values(contacts, run.log, tau)[rows]
+                                   / robot.effort_limits)
+    if "backlash" in learn:
+        regressor["backlash"] = 0.5 * settled_values(contacts, run.log,
+                                                     robot.load_direction(tau))[rows]
     # the drives' readings less what is told (contacts of a map made under a drive model are
     # at the links' angles)
     q0 = np.asarray(contacts.q)[rows]

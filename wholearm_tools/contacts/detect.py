@@ -575,8 +575,7 @@ def _changed_motion_link(e: Event, loaded_moving: NDArray[np.bool_], qd_s: Float
     moved by the contact, and the contact is inward of it."""
     k, end = e.settle, e.end
     held_for = max(end - k, 1)
-    most = max(min_len, 0.5 * held_for)
-    loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= most
+    loaded = np.count_nonzero(loaded_moving[k:end], axis=0) >= max(min_len, 0.5 * held_for)
     after = np.median(qd_s[k:min(k + min_len, end)], axis=0)
     changed = np.abs(after - qd_before) > np.maximum(0.5 * np.abs(qd_before), v_th)
     last = max(k, end - min_len)   # the stop's last samples
@@ -674,21 +673,16 @@ def detect_contacts(log: JointLog, robot: RobotModel | None = None, *,
         loaded &= ~((q >= np.asarray(robot.upper) - tol) & (resid > 0))
     min_len = max(params.min_stop_samples, int(np.ceil(params.min_stop_time / dt - 1e-9)))
     release = max(1, round(params.release_time / dt))
-    obstructed = np.stack([ev.drop_short(stopped[:, j] & loaded[:, j], min_len)
-                           for j in range(n)], axis=1)
+    obstructed = ev.drop_short(stopped & loaded, min_len)
     free_moving = ~stopped & (np.abs(resid) <= params.k_torque * fm.scale)
-    dragging = np.stack([ev.drop_short(~stopped[:, j] & (resid[:, j] * np.sign(qd_s[:, j])
-                                                         > params.k_torque * fm.scale[j]),
-                                       min_len) for j in range(n)], axis=1)
+    dragging = ev.drop_short(~stopped & (resid * np.sign(qd_s) > params.k_torque * fm.scale),
+                             min_len)
     # moving with a torque beyond the free-motion model, either way (driving a slide, or held
     # back): a joint the contact loads without stopping it (:func:`_changed_motion_link`)
-    loaded_moving = np.stack([ev.drop_short(~stopped[:, j] & ~free_moving[:, j], min_len)
-                              for j in range(n)], axis=1)
+    loaded_moving = ev.drop_short(~stopped & ~free_moving, min_len)
     # held back: loaded beyond its friction and not moving along the load (at rest, or driven
     # against it), for a stop's length at least (:func:`_changed_motion_link`)
-    not_along = stopped | (resid * qd_s < 0.0)
-    held_back = np.stack([ev.drop_short(loaded[:, j] & not_along[:, j], min_len)
-                          for j in range(n)], axis=1)
+    held_back = ev.drop_short(loaded & (stopped | (resid * qd_s < 0.0)), min_len)
     events = ev.segment_events(obstructed, ~stopped, free_moving, min_len, release, dragging)
     meta = {"sigma_velocity": sigma_v.tolist(), "sigma_torque": fm.rest_scale.tolist(),
             "sigma_torque_motion": fm.scale.tolist(),

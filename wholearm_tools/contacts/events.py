@@ -276,7 +276,10 @@ def runs(mask: BoolArray) -> tuple[IntArray, IntArray]:
 
 
 def drop_short(mask: BoolArray, min_len: int) -> BoolArray:
-    """``mask`` without its runs of True shorter than ``min_len`` samples."""
+    """``mask`` without its runs of True shorter than ``min_len`` samples; an ``(N, n)`` mask
+    column by column (each joint's runs)."""
+    if mask.ndim == 2:
+        return np.stack([drop_short(mask[:, j], min_len) for j in range(mask.shape[1])], axis=1)
     out = mask.copy()
     s, e = runs(mask)
     for a, b in zip(s, e, strict=True):
