@@ -215,6 +215,21 @@ def test_report_gate_needs_one_contact_to_spare_so_a_wrong_reading_shows():
     assert report_gate(fit_primitive("circle", five), five, 3e-4, policy.max_rel_std)
 
 
+@pytest.mark.parametrize(("p_tip", "carried"), [(0.9, False), (0.1, True)])
+def test_a_primitive_whose_gain_one_contact_carries_has_no_evidence_without_it(p_tip, carried):
+    """Five tips on a circle (its three parameters and two to spare), which eq. (2) read as
+    tips (P_T = 0.9) or as link contacts (P_T = 0.1; their link readings miss the circle).
+    Read against their priors, the five pay for the circle only all together: without any
+    one of them the others would not, and the map does not report it."""
+    p = {"center": np.array([0.0, 0.0]), "radius": 0.2}
+    d = contacts("circle", p, 5, 0, 1, np.random.default_rng(1), noise=1e-4)
+    rd, _ = _readings(d, p_tip_tips=p_tip)
+    inf = infer(rd, kinds=("line", "circle"), B=0.02, noise_floor=1e-4,
+                free_points=d.free_points, rng=0)
+    assert [h.kind for h in inf.selected] == ["circle"]
+    assert (inf.evidence[0] <= 0) == carried
+
+
 def test_report_gate_needs_the_flat_type_told_from_a_surface_curved_at_b():
     b = 0.02  # B, the smallest expected curvature radius
     policy = FitPolicy()

@@ -117,7 +117,9 @@ class Inference:
     probability (over the readings of its contact) under the assigned primitive (the prior
     where unexplained); ``sigma``: the noise level; ``score``: the final description length;
     ``extent``: the scene size; ``history``: the score after each round; ``residual (R,)``:
-    each reading's residual under its contact's assigned primitive (NaN where unexplained).
+    each reading's residual under its contact's assigned primitive (NaN where unexplained);
+    ``evidence``: per selected primitive, its gain in nats without its most valuable contact
+    (:meth:`Scorer.evidence_without_best`; positive: no one contact carries it).
     """
 
     selected: tuple[Hypothesis, ...]
@@ -130,6 +132,7 @@ class Inference:
     history: tuple[float, ...] = ()
     messages: tuple[str, ...] = field(default_factory=tuple)
     residual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    evidence: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -350,6 +353,21 @@ class Scorer:
         against it as strong as a contact's for it (the cost of leaving a contact
         unexplained)."""
         return h.dof * self.param_price(len(h.members)) + h.free * self.c_out
+
+    def evidence_without_best(self, chosen: Sequence[Hypothesis]) -> FloatArray:
+        """Per selected primitive, its description-length gain (what the total would rise by
+        without it) once its most valuable contact is left out of the data: each contact's
+        share is what it saves under the primitive against its cost under the others.  The
+        data less any one contact must still pay for the primitive's parameters (the report
+        gate's leave-one-out principle, applied to the evidence): a primitive whose gain one
+        contact carries rests on that contact's reading, whatever its determination."""
+        out = np.empty(len(chosen))
+        for i, h in enumerate(chosen):
+            rest = self.contact_costs([c for c in chosen if c is not h])
+            share = np.maximum(rest - h.cost, 0.0)
+            out[i] = (float(np.sum(share) - np.max(share, initial=0.0))
+                      - h.dof * self.param_price(len(h.members) - 1) - h.free * self.c_out)
+        return out
 
     def param_price(self, n_k: int) -> float:
         """The code length of one parameter of a primitive of ``n_k`` contacts
@@ -1206,7 +1224,8 @@ def infer(readings: Readings, *, kinds: Sequence[str] | None = None,
         posterior[rows] = post[rows]
         residual[rows] = h.res[rows]
     return Inference(tuple(chosen), assign, reading, posterior, scorer.sigma, history[-1], extent,
-                     tuple(history), tuple(messages), residual)
+                     tuple(history), tuple(messages), residual,
+                     scorer.evidence_without_best(chosen))
 
 
 def _influence(h: Hypothesis, rows: IntArray, residual: FloatArray, readings: Readings
