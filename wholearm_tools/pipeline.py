@@ -348,8 +348,9 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                            open_touch=open_touch)
         if gate and not inf.evidence[k] > 0:
             gate = dataclasses.replace(gate, reason=(
-                "one of its contacts carries its evidence: without it, the others would not "
-                f"pay for its {MODELS[h.kind].dof} parameters ({inf.evidence[k]:.1f} nats)"))
+                "one of its contacts carries its evidence: without it, the others would fall "
+                f"{-inf.evidence[k]:.1f} nats short of paying for its {MODELS[h.kind].dof} "
+                "parameters"))
         if not gate:
             messages.append(f"a {h.kind} on {len(members)} contacts not reported: "
                             f"{gate.reason}")
