@@ -254,8 +254,8 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
     ``candidates`` from :func:`link_candidates`); :func:`wholearm_tools.fit.infer.infer`
     selects the primitives; each is refitted with the robust ``loss`` on its contacts and
     passes :func:`wholearm_tools.fit.gate.report_gate` (kinematic errors of ``policy.
-    kinematic_error`` of ``reach``, or of the scene size without a robot), and its evidence
-    holds without its most valuable contact (``Inference.evidence``), or it is not reported.
+    kinematic_error`` of ``reach``, or of the scene size without a robot; its evidence without
+    its most valuable contact, ``Inference.evidence``) or is not reported.
     ``swept`` (where the robot has been, e.g. :class:`SweptTest` of the swept map) and
     ``base`` are the free-space evidence; ``free_points`` (robot positions) tell a closed
     primitive's side.  ``workers``: processes for the seed proposals (None: every core, at
@@ -345,12 +345,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
         open_touch[rd.fit_order(rd.sphere[idx])] = lying_flat(
             fit, rd, members, policy.k_sigma * sigma_kin, float(B))
         gate = report_gate(fit, data, sigma_kin, policy.max_rel_std, B=float(B),
-                           open_touch=open_touch)
-        if gate and not inf.evidence[k] > 0:
-            gate = dataclasses.replace(gate, reason=(
-                "one of its contacts carries its evidence: without it, the others would fall "
-                f"{-inf.evidence[k]:.1f} nats short of paying for its {MODELS[h.kind].dof} "
-                "parameters"))
+                           open_touch=open_touch, evidence=float(inf.evidence[k]))
         if not gate:
             messages.append(f"a {h.kind} on {len(members)} contacts not reported: "
                             f"{gate.reason}")

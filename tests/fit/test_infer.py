@@ -228,6 +228,12 @@ def test_a_primitive_whose_gain_one_contact_carries_has_no_evidence_without_it(p
                 free_points=d.free_points, rng=0)
     assert [h.kind for h in inf.selected] == ["circle"]
     assert (inf.evidence[0] <= 0) == carried
+    # the report gate passes it on its determination alone, and refuses it on its evidence
+    fit = fit_primitive("circle", d)
+    assert report_gate(fit, d, 3e-4, FitPolicy().max_rel_std)
+    gate = report_gate(fit, d, 3e-4, FitPolicy().max_rel_std, evidence=float(inf.evidence[0]))
+    assert bool(gate) == (not carried)
+    assert ("carries its evidence" in gate.reason) == carried
 
 
 def test_report_gate_needs_the_flat_type_told_from_a_surface_curved_at_b():

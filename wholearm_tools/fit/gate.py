@@ -18,6 +18,10 @@ reaches the map when
   is wrong.  For the same reason it needs at least ``dof + 2`` contacts: on ``dof + 1``, the
   others less any one fit exactly, and a reading taken the wrong way bends the fit without
   leaving a residual that tells;
+* its **evidence** holds without any one of its contacts: the description length the map
+  gains by it, with its most valuable contact left out of the data, is positive
+  (``evidence``, from the inference's score).  Contacts read against eq. (2), or shared with a
+  neighbouring primitive, pay for it only all together otherwise;
 * a flat primitive (line, plane) also has its **type** determined: its contacts tell it from a
   surface curved at the smallest expected radius ``B``.  The flat model is extended by the
   second-order term of a curved surface through its support, ``1/2 u^T K u`` in the in-plane
@@ -206,11 +210,14 @@ def joining_residuals(fit: FitResult, data: FitData, joining: ArrayLike) -> np.n
 
 
 def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: float,
-                B: float | None = None, open_touch: ArrayLike | None = None) -> GateResult:
+                B: float | None = None, open_touch: ArrayLike | None = None,
+                evidence: float | None = None) -> GateResult:
     """Whether ``fit`` (on ``data``) may be reported: see the module docstring (the type test
     of a flat primitive needs ``B``; None skips it).  ``open_touch``: per row of ``data``
     (tips first, then links), contacts whose point of touch is open along a link lying flat
-    (:func:`lying_flat`), left out of the type test."""
+    (:func:`lying_flat`), left out of the type test.  ``evidence``: the primitive's
+    description-length gain without its most valuable contact, in nats
+    (:meth:`wholearm_tools.fit.infer.Scorer.evidence_without_best`; None skips the test)."""
     m = MODELS[fit.kind]
     touch = _touch_rows(fit, data)
     rows, pts, scale = touch if touch is not None else (np.zeros((0, m.dof)), None, 0.0)
@@ -239,6 +246,11 @@ def report_gate(fit: FitResult, data: FitData, sigma_kin: float, max_rel_std: fl
         return GateResult(w_all, loo[i], i,
                           "one of its contacts alone determines it: without it, the worst "
                           f"parameter combination is {_fmt(loo[i])} of its support's size")
+    if evidence is not None and not evidence > 0:
+        return GateResult(w_all, loo[i], -1,
+                          "one of its contacts carries its evidence: without it, the others "
+                          f"would fall {-evidence:.1f} nats short of paying for its {dof} "
+                          "parameters")
     if B and m.linear:
         curv = _curvature_rows(fit, pts, scale, B)
         if open_touch is not None:
