@@ -341,8 +341,9 @@ class Scorer:
             cur = np.minimum(cur, h.cost)
         return cur
 
-    def model_cost(self, h: Hypothesis) -> float:
-        """The primitive's own code length and its free-space term.
+    def model_cost(self, h: Hypothesis, n_k: int | None = None) -> float:
+        """The primitive's own code length and its free-space term (``n_k``: its member
+        count, ``len(h.members)`` unless given).
 
         Each parameter is coded to the precision its ``n_k`` contacts determine it, ``sigma /
         sqrt(n_k)`` over a range of the scene's size: ``log(L / sigma) + bic / 2 log(n_k)``
@@ -352,7 +353,8 @@ class Scorer:
         than it has parameters.  Each sample of its support that the sweep cuts is evidence
         against it as strong as a contact's for it (the cost of leaving a contact
         unexplained)."""
-        return h.dof * self.param_price(len(h.members)) + h.free * self.c_out
+        n_k = len(h.members) if n_k is None else n_k
+        return h.dof * self.param_price(n_k) + h.free * self.c_out
 
     def evidence_without_best(self, chosen: Sequence[Hypothesis]) -> FloatArray:
         """Per selected primitive, its description-length gain (what the total would rise by
@@ -366,7 +368,7 @@ class Scorer:
             rest = self.contact_costs([c for c in chosen if c is not h])
             share = np.maximum(rest - h.cost, 0.0)
             out[i] = (float(np.sum(share) - np.max(share, initial=0.0))
-                      - h.dof * self.param_price(len(h.members) - 1) - h.free * self.c_out)
+                      - self.model_cost(h, len(h.members) - 1))
         return out
 
     def param_price(self, n_k: int) -> float:
