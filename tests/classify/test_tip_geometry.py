@@ -245,3 +245,44 @@ def test_first_within_is_the_earliest_swept_cell_in_the_ball(dim):
         d = np.linalg.norm(points[:, None] - centres[None], axis=-1)
         expect = np.where(d <= radius, values[None], NEVER).min(axis=1)
         np.testing.assert_array_equal(got, expect)
+
+
+def test_driving_joints_torques_count_only_where_the_runs_stops_balance():
+    """Three joints drive the tip of a planar arm into a wall.  At rest the joints that drove
+    balance the contact force, so torques of a push at the tip restrict where the contact can
+    be and raise P_T.  A run whose stops no push explains (torques that pull against the
+    motion that led in: no balance with a contact) says its stops are no static balances, and
+    then the driving joints restrict nothing."""
+    r = 0.015
+    robot = RobotModel.from_spec({
+        "joints": [{"origin": [0, 0, 0], "radius": r}, {"origin": [0.4, 0, 0], "radius": r},
+                   {"origin": [0.3, 0, 0], "radius": r}],
+        "tip": {"offset": [0.15, 0, 0], "radius": r}}, name="three_link")
+    end, start = np.array([0.3, 0.6, 0.2]), np.array([0.0, 0.5, 0.1])
+    approach = np.stack([ramp(start[j], end[j]) for j in range(3)], 1)
+    log = log_from(robot, np.vstack([approach, np.repeat(approach[-1:], 30, 0), approach[::-1]]))
+    idx = 199
+    q, qd = log.q[idx], log.qd[idx - 3]
+    pts, axes = robot.joint_positions_and_axes(q[None])
+    pts, axes = pts[0], axes[0]
+    v = sum(qd[j] * np.cross(axes[j], pts[-1] - pts[j]) for j in range(3))
+    u = v / np.linalg.norm(v)
+    at_tip = pts[-1] + robot.tip_radius * u           # the tip's point ahead, pushed along -u
+    push = 20.0 * np.array([np.cross(axes[j], at_tip - pts[j]) @ u for j in range(3)])
+    pull = -5.0 * qd
+
+    def stops(torques):
+        m = len(torques)
+        return Contacts([log.t[idx]] * m, [2] * m, [idx] * m, [q] * m, [qd] * m,
+                        [log.t[-1]] * m, np.full(3, 0.01), np.full(3, 0.05),
+                        tau_peak=torques, held=[[False] * 3] * m)
+
+    run = Run(robot, log)
+    plain = tip_probability(run, stops([push]), 0.02, params=ClassifyParams(use_torques=False))
+    balanced = tip_probability(run, stops([push]), 0.02)
+    unbalanced = tip_probability(run, stops([push, pull, pull, pull]), 0.02)
+    assert plain.p_tip[0] < 0.35
+    assert balanced.p_tip[0] > plain.p_tip[0] + 0.1
+    assert balanced.meta["driving_lean"] == pytest.approx(20.0)
+    assert unbalanced.meta["driving_lean"] == 90.0
+    assert unbalanced.p_tip[0] == pytest.approx(plain.p_tip[0])

@@ -86,6 +86,7 @@ class ClassifyParams:
     n_sphere: int = 0
     use_torques: bool = True
     torque_angle: float = 20.0
+    statics_quantile: float = 0.95
 
     def swept_tol(self, resolution: float) -> float:
         """How far inside ``B`` of a boundary point a swept cell centre must lie to rule the
@@ -98,6 +99,8 @@ class ClassifyParams:
                              f"{self.link_threshold}, {self.tip_threshold}")
         if not 0.0 < self.prior <= 1.0:
             raise InputError(f"prior must be in (0, 1], got {self.prior}")
+        if not 0.0 < self.statics_quantile <= 1.0:
+            raise InputError(f"statics_quantile must be in (0, 1], got {self.statics_quantile}")
         if not 0.0 <= self.swept_doubt <= 1.0:
             raise InputError(f"swept_doubt must be in [0, 1], got {self.swept_doubt}")
         if not self.sigma0 > 0:
@@ -404,6 +407,7 @@ class TipEvaluator:
         self.tol = self.params.swept_tol(self.grid.resolution)
         M = len(contacts)
         self.torque_informed = np.zeros(M, dtype=bool)
+        self.driving_lean = 90.0   # the lean the driving joints are judged with [deg]
         if M:
             bd = _boundary(robot, np.asarray(contacts.q), np.asarray(contacts.qd_before),
                            np.asarray(contacts.link), self.B, self.params)
@@ -422,32 +426,59 @@ class TipEvaluator:
             self.p_nomap = np.where(den0 > 0, num0 / np.where(den0 > 0, den0, 1), 0.5)
 
     def _condition_on_torques(self, contacts: Contacts, bd: _Boundary) -> None:
-        """Keep only the boundary that explains the held joints' torques.
+        """Keep only the boundary that explains the torques at the height of the stop.
 
-        A joint held still during the move carries the contact force's moment alone; where the
-        contact could lie is restricted to the dilated-boundary points whose force predicts
-        those torques (:func:`wholearm_tools.contacts.detect.torque_consistent`).  Eq. (2) is
-        then the same ratio over that part: the map decides within what the torques allow.
-        Contacts without held joints, or whose torques no admissible point explains (an
-        assumption violated), keep the whole boundary.
+        A joint held still during the move carries the contact force's moment alone.  The
+        joints that drove into the stop are at rest there too, so they balance the same force
+        against their controller, and their torques are its moments as well — where the stop
+        is a static balance with the environment, the force within a friction cone of the
+        normal.  Where the contact could lie is restricted to the dilated-boundary points whose
+        force predicts all those torques (:func:`wholearm_tools.contacts.detect.lean_needed`);
+        eq. (2) is then the same ratio over that part: the map decides within what the torques
+        allow.
+
+        How far the force may lean is the held joints' ``torque_angle``.  For the driving
+        joints it is measured from the run: of every stop two or more joints drove into, the
+        lean its best admissible point needs, at the ``statics_quantile`` of those stops (at
+        least ``torque_angle``).  A run whose stops balance like a rig's needs a friction
+        cone's lean; one whose stops do not (a rigid stop that holds the arm whatever the
+        controller pushes, friction idealised away) needs leans no cone allows, and its
+        driving joints then restrict nothing.  Contacts without judged joints, or whose torques
+        no admissible point explains (an assumption violated), keep the whole boundary.
         """
-        from wholearm_tools.contacts.detect import torque_consistent
+        from wholearm_tools.contacts.detect import lean_needed
 
+        link = np.asarray(contacts.link)
+        moving = np.asarray(contacts.qd_before) != 0
+        driving = moving & (np.arange(contacts.n_joints)[None, :] <= link[:, None])
         held = np.asarray(contacts.held)
-        rows = np.flatnonzero(held.any(axis=1))
+        rows = np.flatnonzero((held | driving).any(axis=1))
         if rows.size == 0:
             return
-        ok = torque_consistent(
-            self.robot, np.asarray(contacts.q)[rows], bd.x[rows], bd.normal[rows],
-            np.asarray(contacts.qd_before)[rows] != 0, held[rows],
-            np.asarray(contacts.tau_peak)[rows], np.asarray(contacts.torque_threshold),
-            np.asarray(contacts.link)[rows], self.B, np.radians(self.params.torque_angle))
+        need = lean_needed(self.robot, np.asarray(contacts.q)[rows], bd.x[rows],
+                           bd.normal[rows], moving[rows], np.asarray(contacts.tau_peak)[rows],
+                           np.asarray(contacts.torque_threshold), link[rows], self.B)
         free = self.tmin[rows] >= NEVER  # admissible with the whole run's map
-        kept = (self.flux[rows] * ok * free).sum(1) > 0
+        admissible = free & (self.flux[rows] > 0)
+        drive_need = np.max(np.where(driving[rows][:, None, :], need, 0.0), axis=-1)
+        several = (driving[rows].sum(axis=1) >= 2) & admissible.any(axis=1)
+        s_held = np.sin(np.radians(self.params.torque_angle))
+        s_drive = s_held
+        if np.any(several):
+            best = np.min(np.where(admissible, drive_need, np.inf), axis=1)[several]
+            # a stop no lean explains counts as needing more than any (sin > 1)
+            s_drive = max(s_held, float(np.quantile(np.minimum(best, 2.0),
+                                                    self.params.statics_quantile)))
+        judging = s_drive < 1.0
+        ok = (np.all(~held[rows][:, None, :] | (need <= s_held), axis=-1)
+              & ((drive_need <= s_drive) | (not judging)))
+        informed = held[rows].any(axis=1) | (judging & driving[rows].any(axis=1))
+        kept = informed & ((self.flux[rows] * ok * free).sum(1) > 0)
         flux = self.flux.copy()
         flux[rows[kept]] *= ok[kept]
         self.flux = flux
         self.torque_informed[rows[kept]] = True
+        self.driving_lean = float(np.degrees(np.arcsin(min(s_drive, 1.0))))
 
     def p_tip(self, until: Any = None) -> tuple[FloatArray, NDArray[np.bool_]]:
         """P_T with the map of samples ``<= until`` (scalar or (M,); None = whole run).
@@ -483,7 +514,8 @@ class TipEvaluator:
         meta = {"resolution": self.grid.resolution, "tol": self.tol,
                 "tip_threshold": prm.tip_threshold, "link_threshold": prm.link_threshold,
                 "swept_doubt": prm.swept_doubt, "sigma0": prm.sigma0,
-                "torque_informed": int(np.count_nonzero(self.torque_informed))}
+                "torque_informed": int(np.count_nonzero(self.torque_informed)),
+                "driving_lean": self.driving_lean}
         return Classification(p, label, variance, self.p_nomap, swept, ok, self.B, causal, meta)
 
 

@@ -350,6 +350,41 @@ def moves_along(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArr
     return np.all(along | ~check, axis=-1)
 
 
+def _fitted_force(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
+                  moving: NDArray[np.bool_], tau: FloatArray, cand: IntArray, B: float,
+                  ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], FloatArray]:
+    """The normal force at each boundary point that best explains the ``moving`` joints'
+    torques: ``(lever (R, Q, n, 3), g (R, Q, n), on_chain (1, 1, n) or (R, 1, n), f (R, Q))``
+    (see :func:`torque_consistent`)."""
+    n = robot.dof
+    lever = _point_velocities(robot, q, x_bd, nu, B)  # (R, Q, n, 3)
+    g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
+    on_chain = np.arange(n)[None, None, :] <= cand[:, None, None]   # joints that move the link
+    g = np.where(on_chain, g, 0.0)
+    gb = np.where(moving[:, None, :], g, 0.0)
+    f = np.maximum(-np.einsum("rqj,rj->rq", gb, np.where(moving, tau, 0.0))
+                   / np.maximum(np.einsum("rqj,rqj->rq", gb, gb), 1e-300), 0.0)
+    return lever, g, on_chain, f
+
+
+def lean_needed(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
+                moving: NDArray[np.bool_], tau: FloatArray, tau_tol: FloatArray,
+                cand: IntArray, B: float) -> FloatArray:
+    """Sine of the least lean from the normal the force at each boundary point needs to bring
+    each joint's moment within ``tau_tol`` of its torque, each joint judged on its own (the
+    ``one_force=False`` test of :func:`torque_consistent`): ``(R, Q, n)``, 0 where the normal
+    force already does, ``inf`` where no lean does (a joint off the chain that is loaded, no
+    force).  Arguments as for :func:`torque_consistent`."""
+    R = x_bd.shape[0]
+    tol = np.broadcast_to(np.asarray(tau_tol, dtype=float), (R, robot.dof))
+    lever, g, on_chain, f = _fitted_force(robot, q, x_bd, nu, moving, tau, cand, B)
+    excess = np.abs(f[..., None] * g + tau[:, None, :]) - tol[:, None, :]
+    per_lean = np.where(on_chain, f[..., None] * np.linalg.norm(lever, axis=-1), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        need = np.where(per_lean > 0, excess / np.where(per_lean > 0, per_lean, 1.0), np.inf)
+    return np.where(excess <= 0, 0.0, need)
+
+
 def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatArray,
                       moving: NDArray[np.bool_], held: NDArray[np.bool_], tau: FloatArray,
                       tau_tol: FloatArray, cand: IntArray, B: float, angle: float,
@@ -367,7 +402,7 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     * ``one_force=False``: a point is consistent when every ``held`` joint's observed torque
       lies within ``tau_tol`` of its prediction ``-f g_i``, widened by the change of the moment
       when the force leans by ``angle`` (``sin(angle) f |a_i x (r - o_i)|``) — each joint
-      judged on its own, as if each could have a lean of its own;
+      judged on its own, as if each could have a lean of its own (:func:`lean_needed`);
     * ``one_force=True``: consistent when **one** lean ``t`` (tangent to the boundary,
       ``|t| <= tan(angle)``, force ``f (-nu + t)``) brings every held joint's prediction within
       ``tau_tol`` of the observed torque at once — one contact has one force.  Stricter where
@@ -388,23 +423,12 @@ def torque_consistent(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: Fl
     -------
     (R, Q) bool (all True for a row without held joints)
     """
-    R, Qn = x_bd.shape[:2]
-    n = robot.dof
-    tol = np.broadcast_to(np.asarray(tau_tol, dtype=float), (R, n))
-    lever = _point_velocities(robot, q, x_bd, nu, B)  # (R, Q, n, 3)
-    g = -np.einsum("rqjk,rqk->rqj", lever, nu)        # moment per unit force, (R, Q, n)
-    on_chain = np.arange(n)[None, None, :] <= cand[:, None, None]   # joints that move the link
-    g = np.where(on_chain, g, 0.0)
-    mv = moving[:, None, :]
-    gb = np.where(mv, g, 0.0)
-    f = np.maximum(-np.einsum("rqj,rj->rq", gb, np.where(moving, tau, 0.0))
-                   / np.maximum(np.einsum("rqj,rqj->rq", gb, gb), 1e-300), 0.0)
     if not one_force:
-        pred = -f[..., None] * g                      # (R, Q, n)
-        slack = np.sin(angle) * f[..., None] * np.linalg.norm(lever, axis=-1)
-        slack = np.where(on_chain, slack, 0.0)
-        ok = np.abs(pred - tau[:, None, :]) <= tol[:, None, :] + slack
-        return np.all(~held[:, None, :] | ok, axis=-1)
+        need = lean_needed(robot, q, x_bd, nu, moving, tau, tau_tol, cand, B)
+        return np.all(~held[:, None, :] | (need <= np.sin(angle)), axis=-1)
+    R, Qn = x_bd.shape[:2]
+    tol = np.broadcast_to(np.asarray(tau_tol, dtype=float), (R, robot.dof))
+    lever, g, on_chain, f = _fitted_force(robot, q, x_bd, nu, moving, tau, cand, B)
     # moment change per unit lean along two tangent directions e1, e2 of the boundary
     e1 = np.cross(nu, np.where(np.abs(nu[..., :1]) < 0.9, [1.0, 0, 0], [0, 1.0, 0]))
     e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
