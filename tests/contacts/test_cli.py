@@ -224,6 +224,7 @@ def test_every_contact_shows_its_evidence(tmp_path):
     assert "dur s" in head
     table = tmp_path / "c.csv"
     assert CliRunner().invoke(cli, ["contacts", str(path), "-o", str(table)]).exit_code == 0
-    rows = list(csv.DictReader(table.open()))
+    with table.open() as fh:
+        rows = list(csv.DictReader(fh))
     assert rows
     assert all(float(r["load"]) > 1.0 for r in rows)
