@@ -555,7 +555,7 @@ def _learning_drives(run: Run, params: ReconstructParams,
 
 def _reconstruct(run: Run, params: ReconstructParams,
                  progress: Callable[[str], None] | None) -> Reconstruction:
-    from wholearm_tools.classify import tip_probability
+    from wholearm_tools.classify import ClassifyParams, tip_probability
     from wholearm_tools.contacts import detect_contacts
 
     say = progress or (lambda _: None)
@@ -590,6 +590,9 @@ def _reconstruct(run: Run, params: ReconstructParams,
         from wholearm_tools.classify.swept import swept_map
 
         say(f"fitting primitives to {len(table)} contacts")
+        # the other candidate links' readings are judged with the lean the run's stops need,
+        # measured once over all of them (a property of the run, not of the few re-read)
+        same_run = ClassifyParams(driving_lean=classification.meta["driving_lean"])
         swept = (SweptTest(swept_map(run.robot, q_link, B=params.B))
                  if params.use_sweep else None)
         surface_map, fits, table, messages = fit_table(
@@ -597,8 +600,9 @@ def _reconstruct(run: Run, params: ReconstructParams,
             noise=params.noise, free_points=hints, meta=meta, noise_floor=floor, swept=swept,
             base=run.robot.base, workers=params.workers,
             candidates=link_candidates(
-                run.robot, contacts, lambda c: tip_probability(run, c, params.B,
-                                                               causal=params.causal).p_tip),
+                run.robot, contacts,
+                lambda c: tip_probability(run, c, params.B, causal=params.causal,
+                                          params=same_run).p_tip),
             reach=float(run.robot.reach))
     timings["fit"] = time.perf_counter() - clock
     return Reconstruction(run=run, params=params, contacts=contacts,

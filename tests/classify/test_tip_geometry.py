@@ -286,3 +286,7 @@ def test_driving_joints_torques_count_only_where_the_runs_stops_balance():
     assert balanced.meta["driving_lean"] == pytest.approx(20.0)
     assert unbalanced.meta["driving_lean"] == 90.0
     assert unbalanced.p_tip[0] == pytest.approx(plain.p_tip[0])
+    # a lean measured over the whole run carries to a few of its contacts evaluated again
+    given = tip_probability(run, stops([push]), 0.02,
+                            params=ClassifyParams(driving_lean=unbalanced.meta["driving_lean"]))
+    assert given.p_tip[0] == pytest.approx(plain.p_tip[0])

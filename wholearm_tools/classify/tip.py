@@ -87,6 +87,7 @@ class ClassifyParams:
     use_torques: bool = True
     torque_angle: float = 20.0
     statics_quantile: float = 0.95
+    driving_lean: float | None = None
 
     def swept_tol(self, resolution: float) -> float:
         """How far inside ``B`` of a boundary point a swept cell centre must lie to rule the
@@ -99,6 +100,8 @@ class ClassifyParams:
                              f"{self.link_threshold}, {self.tip_threshold}")
         if not 0.0 < self.prior <= 1.0:
             raise InputError(f"prior must be in (0, 1], got {self.prior}")
+        if self.driving_lean is not None and not 0.0 <= self.driving_lean <= 90.0:
+            raise InputError(f"driving_lean must be in [0, 90] degrees, got {self.driving_lean}")
         if not 0.0 < self.statics_quantile <= 1.0:
             raise InputError(f"statics_quantile must be in (0, 1], got {self.statics_quantile}")
         if not 0.0 <= self.swept_doubt <= 1.0:
@@ -440,7 +443,8 @@ class TipEvaluator:
         How far the force may lean is the held joints' ``torque_angle``.  For the driving
         joints it is measured from the run: of every stop two or more joints drove into, the
         lean its best admissible point needs, at the ``statics_quantile`` of those stops (at
-        least ``torque_angle``).  A run whose stops balance like a rig's needs a friction
+        least ``torque_angle``), unless ``driving_lean`` gives it (the run's, measured once,
+        when a few of its contacts are evaluated again as if on other links).  A run whose stops balance like a rig's needs a friction
         cone's lean; one whose stops do not (a rigid stop that holds the arm whatever the
         controller pushes, friction idealised away) needs leans no cone allows, and its
         driving joints then restrict nothing.  Contacts without judged joints, or whose torques
@@ -464,7 +468,9 @@ class TipEvaluator:
         several = (driving[rows].sum(axis=1) >= 2) & admissible.any(axis=1)
         s_held = np.sin(np.radians(self.params.torque_angle))
         s_drive = s_held
-        if np.any(several):
+        if self.params.driving_lean is not None:
+            s_drive = max(s_held, float(np.sin(np.radians(min(self.params.driving_lean, 90.0)))))
+        elif np.any(several):
             best = np.min(np.where(admissible, drive_need, np.inf), axis=1)[several]
             # a stop no lean explains counts as needing more than any (sin > 1)
             s_drive = max(s_held, float(np.quantile(np.minimum(best, 2.0),
