@@ -444,11 +444,12 @@ class TipEvaluator:
         joints it is measured from the run: of every stop two or more joints drove into, the
         lean its best admissible point needs, at the ``statics_quantile`` of those stops (at
         least ``torque_angle``), unless ``driving_lean`` gives it (the run's, measured once,
-        when a few of its contacts are evaluated again as if on other links).  A run whose stops balance like a rig's needs a friction
-        cone's lean; one whose stops do not (a rigid stop that holds the arm whatever the
-        controller pushes, friction idealised away) needs leans no cone allows, and its
-        driving joints then restrict nothing.  Contacts without judged joints, or whose torques
-        no admissible point explains (an assumption violated), keep the whole boundary.
+        when a few of its contacts are evaluated again as if on other links).  A run whose
+        stops balance like a rig's needs a friction cone's lean; one whose stops do not (a
+        rigid stop that holds the arm whatever the controller pushes, friction idealised away)
+        needs leans no cone allows, and its driving joints then restrict nothing.  Contacts
+        without judged joints, or whose torques no admissible point explains (an assumption
+        violated), keep the whole boundary.
         """
         from wholearm_tools.contacts.detect import lean_needed
 
