@@ -354,7 +354,7 @@ def _fitted_force(robot: RobotModel, q: FloatArray, x_bd: FloatArray, nu: FloatA
                   moving: NDArray[np.bool_], tau: FloatArray, cand: IntArray, B: float,
                   ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], FloatArray]:
     """The normal force at each boundary point that best explains the ``moving`` joints'
-    torques: ``(lever (R, Q, n, 3), g (R, Q, n), on_chain (1, 1, n) or (R, 1, n), f (R, Q))``
+    torques: ``(lever (R, Q, n, 3), g (R, Q, n), on_chain (R, 1, n), f (R, Q))``
     (see :func:`torque_consistent`)."""
     n = robot.dof
     lever = _point_velocities(robot, q, x_bd, nu, B)  # (R, Q, n, 3)
