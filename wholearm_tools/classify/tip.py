@@ -466,13 +466,13 @@ class TipEvaluator:
         free = self.tmin[rows] >= NEVER  # admissible with the whole run's map
         admissible = free & (self.flux[rows] > 0)
         drive_need = np.max(np.where(driving[rows][:, None, :], need, 0.0), axis=-1)
-        several = (driving[rows].sum(axis=1) >= 2) & admissible.any(axis=1)
         s_held = np.sin(np.radians(self.params.torque_angle))
         s_drive = s_held
+        several = (driving[rows].sum(axis=1) >= 2) & admissible.any(axis=1)
         if self.params.driving_lean is not None:
-            s_drive = max(s_held, float(np.sin(np.radians(min(self.params.driving_lean, 90.0)))))
+            s_drive = max(s_held, float(np.sin(np.radians(self.params.driving_lean))))
         elif np.any(several):
-            best = np.min(np.where(admissible, drive_need, np.inf), axis=1)[several]
+            best = np.min(np.where(admissible[several], drive_need[several], np.inf), axis=1)
             # a stop no lean explains counts as needing more than any (sin > 1)
             s_drive = max(s_held, float(np.quantile(np.minimum(best, 2.0),
                                                     self.params.statics_quantile)))
