@@ -346,11 +346,21 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
     active = bridge(obstructed.any(axis=1), release)
     if dragging is not None:
         # a slide is part of the obstruction it ends in (the arm dragged along the surface
-        # until it held), and joins two obstructions it connects (a rebound that comes back)
-        drag = dragging.any(axis=1)
+        # until it held), and joins two obstructions it connects (a rebound that comes back).
+        # Gaps shorter than a release are bridged (the joints decelerating out of the slide
+        # into rest, neither dragging nor at rest yet), unless the arm moved freely in them,
+        # every moving joint within the free-motion model: then it was off the surface, and a
+        # drag before that (the joints breaking away from rest at a move's start) is no part
+        # of this contact
+        free_arm = moving.any(axis=1) & ~(moving & ~free_moving).any(axis=1)
+        reach = active | dragging.any(axis=1)
+        starts, ends = runs(reach)
+        for a, b in zip(ends[:-1], starts[1:], strict=True):
+            if b - a <= release and not np.any(free_arm[a:b]):
+                reach[a:b] = True
         for a in runs(active)[0]:
             b = a
-            while b > 0 and drag[b - 1]:
+            while b > 0 and reach[b - 1]:
                 b -= 1
             active[b:a] = True
     out: list[Event] = []
