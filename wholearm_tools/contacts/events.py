@@ -307,12 +307,13 @@ def drop_short(mask: BoolArray, min_len: int) -> BoolArray:
     return out
 
 
-def bridge(mask: BoolArray, max_gap: int) -> BoolArray:
-    """``mask`` with its gaps of False no longer than ``max_gap`` samples filled."""
+def bridge(mask: BoolArray, max_gap: int, allowed: BoolArray | None = None) -> BoolArray:
+    """``mask`` with its gaps of False no longer than ``max_gap`` samples filled (only those
+    whose every sample is ``allowed``, when given)."""
     out = mask.copy()
     s, e = runs(mask)
     for a, b in zip(e[:-1], s[1:], strict=True):
-        if b - a <= max_gap:
+        if b - a <= max_gap and (allowed is None or np.all(allowed[a:b])):
             out[a:b] = True
     return out
 
@@ -353,11 +354,7 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
         # drag before that (the joints breaking away from rest at a move's start) is no part
         # of this contact
         free_arm = moving.any(axis=1) & ~(moving & ~free_moving).any(axis=1)
-        reach = active | dragging.any(axis=1)
-        starts, ends = runs(reach)
-        for a, b in zip(ends[:-1], starts[1:], strict=True):
-            if b - a <= release and not np.any(free_arm[a:b]):
-                reach[a:b] = True
+        reach = bridge(active | dragging.any(axis=1), release, allowed=~free_arm)
         for a in runs(active)[0]:
             b = a
             while b > 0 and reach[b - 1]:
