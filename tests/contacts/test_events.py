@@ -36,26 +36,6 @@ def test_a_slide_that_ends_in_a_stop_is_one_event_from_the_slide_on():
 
 
 
-def test_a_slide_joins_the_stop_across_its_deceleration_but_not_across_free_motion():
-    """Between a slide and the stop it ends in the joints decelerate for a few samples,
-    neither pushing along their motion nor at rest: the event still starts at the slide.  A
-    drag followed by free motion of the whole arm (a move breaking away from rest, then
-    moving freely into a contact) is no part of the contact, however short the free part."""
-    obs, mov, free, drag = _masks()
-    mov[40:80] = free[40:80] = True          # approach
-    mov[80:150] = True                       # slide ...
-    drag[80:145, 1] = True                   # ... the last 5 samples decelerating, unloaded
-    obs[150:300, :] = True                   # stop
-    events = segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)
-    assert [(e.start, e.end) for e in events] == [(80, 300)]
-    obs, mov, free, drag = _masks()
-    mov[100:150] = True
-    drag[100:130, 0] = True                  # breaking away from rest
-    free[130:150] = True                     # then the whole arm moves freely, 20 samples
-    obs[150:300, :] = True
-    events = segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)
-    assert [(e.start, e.end) for e in events] == [(150, 300)]
-
 def test_a_rebound_joined_by_a_slide_is_one_contact():
     obs, mov, free, drag = _masks()
     mov[20:60] = free[20:60] = True

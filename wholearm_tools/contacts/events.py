@@ -307,13 +307,12 @@ def drop_short(mask: BoolArray, min_len: int) -> BoolArray:
     return out
 
 
-def bridge(mask: BoolArray, max_gap: int, allowed: BoolArray | None = None) -> BoolArray:
-    """``mask`` with its gaps of False no longer than ``max_gap`` samples filled (only those
-    whose every sample is ``allowed``, when given)."""
+def bridge(mask: BoolArray, max_gap: int) -> BoolArray:
+    """``mask`` with its gaps of False no longer than ``max_gap`` samples filled."""
     out = mask.copy()
     s, e = runs(mask)
     for a, b in zip(e[:-1], s[1:], strict=True):
-        if b - a <= max_gap and (allowed is None or np.all(allowed[a:b])):
+        if b - a <= max_gap:
             out[a:b] = True
     return out
 
@@ -347,17 +346,11 @@ def segment_events(obstructed: BoolArray, moving: BoolArray, free_moving: BoolAr
     active = bridge(obstructed.any(axis=1), release)
     if dragging is not None:
         # a slide is part of the obstruction it ends in (the arm dragged along the surface
-        # until it held), and joins two obstructions it connects (a rebound that comes back).
-        # Gaps shorter than a release are bridged (the joints decelerating out of the slide
-        # into rest, neither dragging nor at rest yet), unless the arm moved freely in them,
-        # every moving joint within the free-motion model: then it was off the surface, and a
-        # drag before that (the joints breaking away from rest at a move's start) is no part
-        # of this contact
-        free_arm = moving.any(axis=1) & ~(moving & ~free_moving).any(axis=1)
-        reach = bridge(active | dragging.any(axis=1), release, allowed=~free_arm)
+        # until it held), and joins two obstructions it connects (a rebound that comes back)
+        drag = dragging.any(axis=1)
         for a in runs(active)[0]:
             b = a
-            while b > 0 and reach[b - 1]:
+            while b > 0 and drag[b - 1]:
                 b -= 1
             active[b:a] = True
     out: list[Event] = []
