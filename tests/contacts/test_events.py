@@ -3,11 +3,8 @@ joined by a slide is one contact, a stop that follows no motion is none, and the
 outermost obstructed joint."""
 
 import numpy as np
-import pytest
 
-from wholearm_tools.contacts import detect_contacts, match_events
 from wholearm_tools.contacts.events import segment_events
-from wholearm_tools.sim.scenarios import load_scenario
 
 N, n = 400, 3
 MIN_LEN, RELEASE = 10, 20
@@ -33,7 +30,6 @@ def test_a_slide_that_ends_in_a_stop_is_one_event_from_the_slide_on():
     assert [(e.start, e.end, e.link) for e in events] == [(20, 40, 2), (80, 300, 2)]
     # without the slide evidence the event starts where the arm held
     assert segment_events(obs, mov, free, MIN_LEN, RELEASE)[1].start == 150
-
 
 
 def test_a_rebound_joined_by_a_slide_is_one_contact():
@@ -80,24 +76,3 @@ def test_the_link_is_the_last_to_stop_even_when_it_slides_on_under_the_load():
     drag[100:180, 2] = True
     free[100:180, 2] = False
     assert segment_events(obs, mov, free, MIN_LEN, RELEASE, drag)[0].link == 1
-
-
-
-
-
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_a_kinematic_runs_moves_are_not_read_as_slides(seed):
-    """A kinematic run's commanded torques in free motion are a PD controller's on a lagging
-    velocity estimate: linear in velocity and acceleration.  Most moves end in a contact
-    whose impact (a deceleration ten times the drive's, the torque pushing on) pulls a plain
-    fit's inertia the wrong way, and cruise and rests, which need no inertia, are the larger
-    half of the motion.  Unless the free-motion model takes up the accelerations anyway,
-    every move's acceleration reads as a joint dragging beyond the model, a slide that joins
-    the next contact to the one before.  Every contact must come out as its own event."""
-    run = load_scenario("lab_circle").simulate(seed=seed, duration=60.0, engine="kinematic").run
-    c = detect_contacts(run.log, run.robot)
-    m = match_events(c, run.truth)
-    assert np.unique(m[m >= 0]).size >= 0.98 * len(run.truth.contact_t)
-    assert len(c) <= len(run.truth.contact_t) + 1

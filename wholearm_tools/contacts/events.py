@@ -181,43 +181,24 @@ def _lsq(X: FloatArray, y: FloatArray) -> FloatArray:
     return z / d
 
 
-def _leverage_strata(X: FloatArray, bounds: tuple[float, ...] = (0.5, 0.75, 0.9)
-                     ) -> list[IntArray]:
-    """Rows of ``X (N, k)`` grouped by leverage (the diagonal of the hat matrix) at the
-    quantiles ``bounds``.  The trimming of :func:`_trimmed_fit` keeps its share of each group,
-    so a regime of the regressors that is a minority of the samples (a joint accelerating,
-    most of the motion being at cruise) is fitted, not trimmed away as if it were contact:
-    contacts are outliers in the torque, not in the motion."""
-    Q, _ = np.linalg.qr(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300))
-    lev = np.einsum("ij,ij->i", Q, Q)
-    edges = np.quantile(lev, bounds)
-    group = np.searchsorted(edges, lev, side="right")
-    return [np.flatnonzero(group == g) for g in range(len(bounds) + 1)
-            if np.any(group == g)]
-
-
 def _trimmed_fit(X: FloatArray, y: FloatArray, rows: BoolArray, keep: float = 0.5,
                  steps: int = 8, clip: float = 4.0) -> tuple[FloatArray, float]:
     """Robust least squares of ``y ~ X`` over ``rows``: concentration steps of least trimmed
-    squares (refit on the ``keep`` share of the rows with the smallest residuals, that share
-    of each leverage group, :func:`_leverage_strata`; high breakdown: contact samples may be
-    nearly half of them), then one reweighting at ``clip`` robust sigmas for efficiency.
-    Returns the coefficients and the residual scale."""
+    squares (refit on the ``keep`` share of the rows with the smallest residuals; high
+    breakdown: contact samples may be nearly half of them), then one reweighting at ``clip``
+    robust sigmas for efficiency.  Returns the coefficients and the residual scale."""
     Xi, yi = X[rows], y[rows]
     n = len(yi)
     if n <= X.shape[1]:
         return (_lsq(Xi, yi) if n else np.zeros(X.shape[1])), 1.0
     h = max(int(keep * n), X.shape[1] + 1)
-    strata = _leverage_strata(Xi)
     use = np.ones(n, dtype=bool)
     beta = np.zeros(X.shape[1])
     for _ in range(steps):
         beta = _lsq(Xi[use], yi[use])
         r = np.abs(yi - Xi @ beta)
         nxt = np.zeros(n, dtype=bool)
-        for idx in strata:
-            k = max(1, round(h / n * idx.size))
-            nxt[idx[np.argpartition(r[idx], k - 1)[:k]]] = True
+        nxt[np.argpartition(r, h - 1)[:h]] = True
         if np.array_equal(nxt, use):
             break
         use = nxt
