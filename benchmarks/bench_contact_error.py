@@ -9,6 +9,12 @@ contacts' penetration, a bore's convex tiles and contacts on no listed surface (
 post's end cap) on the physics engine.  The table gives the ``|error|`` percentiles per scenario
 and per kind, the signed mean (negative: inside the surface) and the share beyond 1 mm.
 
+A second table gives the angle the approach eq. (2) reads (``qd_before``) makes with the surface
+at the true contact point: the cosine of that point's velocity, as a point of the link, with the
+surface's normal into the surface (a body contact's velocity along its link left out).  Eq. (2)
+weighs where on the arm a contact lies by ``(n·v)+``; a cosine near 0 or below is a contact
+met at a grazing angle or read from a motion that did not lead into it (a slide, a rebound).
+
 Run:  .venv/bin/python benchmarks/bench_contact_error.py [--engine physics] [--seeds 0-9]
       [--scenarios ...] [--cache DIR]
 """
@@ -27,8 +33,31 @@ from wholearm_tools.geometry.base import primitive_from_dict
 PERCENTILES = (50, 90, 95, 99)
 
 
-def contact_errors(run) -> list[tuple[str, float]]:
-    """``(kind, signed error [m])`` of every detection paired on its true link."""
+def _approach_cosine(robot, q, qd, link: int, kind: str, point, a, b, surface) -> float:
+    """Cosine of the velocity of ``point`` (as a point of ``link`` at ``q, qd``) with the normal
+    into ``surface`` there; NaN where the point did not move."""
+    x = np.zeros(3)
+    x[: surface.dim] = point
+    pts, axes = robot.joint_positions_and_axes(q[None])
+    v = np.sum(qd[: link + 1, None] * np.cross(axes[0, : link + 1], x - pts[0, : link + 1]),
+               axis=0)[: surface.dim]
+    if kind == "body":
+        u = (b - a) / np.linalg.norm(b - a)
+        v = v - np.dot(v, u) * u
+        near = a + np.clip(np.dot(point - a, u), 0.0, np.linalg.norm(b - a)) * u
+    else:
+        near = b
+    normal = np.asarray(surface.gradient(np.asarray(point)[None])).reshape(-1)
+    normal = normal / np.linalg.norm(normal)
+    if np.dot(normal, near - point) < 0:
+        normal = -normal          # from the surface towards the arm
+    speed = float(np.linalg.norm(v))
+    return -float(np.dot(v, normal)) / speed if speed > 1e-9 else float("nan")
+
+
+def contact_errors(run) -> list[tuple[str, float, float]]:
+    """``(kind, signed error [m], approach cosine)`` of every detection paired on its true
+    link."""
     robot, truth = run.robot, run.truth
     surfaces = {int(s["id"]): primitive_from_dict(s) for s in truth.surfaces}
     contacts = detect_contacts(run.log, robot)
@@ -47,7 +76,11 @@ def contact_errors(run) -> list[tuple[str, float]]:
                          for fs in (1.0, -1.0)), key=abs)
         else:
             clear = float(np.asarray(surface.distance(b[None])).reshape(-1)[0])
-        out.append((kind, float(abs(clear) - robot.contact_radius(link, kind != "body"))))
+        point = np.asarray(truth.contact_point[j], dtype=float)[: surface.dim]
+        cosine = _approach_cosine(robot, contacts.q[i], contacts.qd_before[i], link, kind,
+                                  point, a, b, surface)
+        out.append((kind, float(abs(clear) - robot.contact_radius(link, kind != "body")),
+                    cosine))
     return out
 
 
@@ -68,11 +101,16 @@ def main() -> None:
     warnings.simplefilter("ignore")
     by_scenario: dict[str, list[float]] = {}
     by_kind: dict[str, list[float]] = {}
+    cos_scenario: dict[str, list[float]] = {}
+    cos_kind: dict[str, list[float]] = {}
     for name in args.scenarios.split(","):
         for seed in args.seeds:
-            for kind, err in contact_errors(get_run(name, seed, args)):
+            for kind, err, cosine in contact_errors(get_run(name, seed, args)):
                 by_scenario.setdefault(name, []).append(err)
                 by_kind.setdefault(kind, []).append(err)
+                if np.isfinite(cosine):
+                    cos_scenario.setdefault(name, []).append(cosine)
+                    cos_kind.setdefault(kind, []).append(cosine)
     print(f"# contact error at the settled configuration, engine {args.engine}, "
           f"seeds {args.seeds[0]}-{args.seeds[-1]} (mm)")
     head = (f"{'':<16} {'n':>6} " + " ".join(f"{'p' + str(p):>9}" for p in PERCENTILES)
@@ -83,6 +121,15 @@ def main() -> None:
     for kind, errors in sorted(by_kind.items()):
         print(row(kind, errors))
     print(row("all", [e for v in by_scenario.values() for e in v]))
+    print("\n# cosine of the approach with the normal into the true surface at the true point")
+    print(f"{'':<16} {'n':>6} {'p10':>7} {'p25':>7} {'median':>7} {'< 0':>7} {'< 0.1':>7}")
+    for label, cos in [*cos_scenario.items(), *sorted(cos_kind.items()),
+                       ("all", [c for v in cos_scenario.values() for c in v])]:
+        c = np.asarray(cos)
+        if len(c):
+            p10, p25, p50 = np.percentile(c, (10, 25, 50))
+            print(f"{label:<16} {len(c):>6} {p10:>7.2f} {p25:>7.2f} {p50:>7.2f} "
+                  f"{np.mean(c < 0):>7.3f} {np.mean(c < 0.1):>7.3f}")
 
 
 if __name__ == "__main__":
