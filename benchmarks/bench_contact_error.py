@@ -34,22 +34,20 @@ PERCENTILES = (50, 90, 95, 99)
 
 
 def _approach_cosine(robot, q, qd, link: int, kind: str, point, a, b, surface) -> float:
-    """Cosine of the velocity of ``point`` (as a point of ``link`` at ``q, qd``) with the normal
-    into ``surface`` there; NaN where the point did not move."""
-    x = np.zeros(3)
-    x[: surface.dim] = point
-    pts, axes = robot.joint_positions_and_axes(q[None])
-    v = np.sum(qd[: link + 1, None] * np.cross(axes[0, : link + 1], x - pts[0, : link + 1]),
-               axis=0)[: surface.dim]
+    """Cosine of the approach velocity with the normal into ``surface`` at ``point``; NaN where
+    the link did not move there.  The velocity is that of the touching feature's centre (the
+    outer sphere's, or the axis point under ``point`` for the side, its motion along the link
+    left out): the feature's rolling adds nothing along the normal."""
+    axis = b - a
+    length = float(np.linalg.norm(axis))
+    u = axis / length
+    s = 1.0 if kind != "body" else float(np.clip(np.dot(point - a, u) / length, 0.0, 1.0))
+    v = robot.point_velocities(q, qd, link, s)[: surface.dim]
     if kind == "body":
-        u = (b - a) / np.linalg.norm(b - a)
         v = v - np.dot(v, u) * u
-        near = a + np.clip(np.dot(point - a, u), 0.0, np.linalg.norm(b - a)) * u
-    else:
-        near = b
     normal = np.asarray(surface.gradient(np.asarray(point)[None])).reshape(-1)
     normal = normal / np.linalg.norm(normal)
-    if np.dot(normal, near - point) < 0:
+    if np.dot(normal, a + s * axis - point) < 0:
         normal = -normal          # from the surface towards the arm
     speed = float(np.linalg.norm(v))
     return -float(np.dot(v, normal)) / speed if speed > 1e-9 else float("nan")
