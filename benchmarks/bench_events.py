@@ -4,7 +4,8 @@ For every scenario × seed, a run is simulated with the chosen engine (``--engin
 MuJoCo with friction, soft contacts, joint friction; ``kinematic``: the idealised engine), its
 contacts detected from the joint signals alone and classified by eq. (2), and the detections
 paired with the true contact events (:func:`wholearm_tools.contacts.match_events`: intervals
-first obstruction → release).  Per run:
+first obstruction → release; a detection whose link was in contact where it settled pairs
+with that contact or nothing, so a contact split in two costs precision).  Per run:
 
 * ``events`` true contact events; ``stop`` those that stopped the arm (blocked a commanded
   motion); ``det`` detections;

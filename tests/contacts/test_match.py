@@ -52,3 +52,16 @@ def test_a_detection_pairs_with_the_contact_on_its_link_held_where_it_measured()
     assert match_events(_contacts([1.02], [2.8], [2], t_settle=[2.4]), truth).tolist() == [1]
     # settled before the tip touched: the tip's contact is not what it measured
     assert match_events(_contacts([1.02], [2.8], [2], t_settle=[2.0]), truth).tolist() == [0]
+
+
+def test_a_second_detection_of_one_contact_is_a_repeat_not_a_concurrent_contact():
+    # the tip (link 2) touched at 1.0 s and held until 3.0 s; the elbow (link 1) touched at
+    # 2.0 s while it held; chatter split the tip's contact into two detections, both naming
+    # link 2 and settling while the tip touched.  The second is a repeat of the tip's contact:
+    # it matches nothing, and the elbow's contact, which no detection named, is not found
+    truth = _truth([1.0, 2.0], [3.0, 3.0], [2, 1], ["tip", "joint"])
+    det = _contacts([1.0, 2.1], [2.0, 3.0], [2, 2], t_settle=[1.5, 2.5])
+    assert match_events(det, truth).tolist() == [0, -1]
+    # the same second detection naming the elbow's link measured the elbow's contact
+    det = _contacts([1.0, 2.1], [2.0, 3.0], [2, 1], t_settle=[1.5, 2.5])
+    assert match_events(det, truth).tolist() == [0, 1]

@@ -38,7 +38,9 @@ def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
     ``l`` that was in contact then (within ``tol``) is the one it measured, and that pair comes
     before any difference of overlap — the arm is often held by a second contact that began
     earlier and overlaps the detection longer (a body contact the arm slid along before the
-    tip stopped it).
+    tip stopped it).  Such a detection pairs with no other: when another detection has that
+    contact (the contact split in two), it is a repeat and matches nothing, not a contact of
+    another link held at the same time, which it did not name.
 
     Parameters
     ----------
@@ -74,6 +76,10 @@ def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
     if at is not None:
         ta = np.asarray(at, dtype=float).reshape(-1)[:, None]
         measured = same_link & (ts[None, :] - tol <= ta) & (ta <= te[None, :] + tol)
+        # a detection whose link was in contact where it settled measured that contact: it
+        # pairs with it or, when another detection of the same contact has it, with nothing
+        # (a repeat), never with a concurrent contact of another link it did not name
+        feasible &= measured | ~measured.any(axis=1, keepdims=True)
     bonus = float(np.max(overlap)) + tol      # more than any difference of overlap
     span = min(overlap.shape) * (float(np.max(overlap)) + 2 * tol + bonus) + 1.0
     gain = np.where(feasible, span + bonus * measured + overlap + tol * same_link
