@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from wholearm_tools.classify import tip_probability
-from wholearm_tools.contacts import detect_contacts, match_events
+from wholearm_tools.contacts import detect_contacts, in_contact_at, match_events
 from wholearm_tools.logs import read_run, write_run
 from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
@@ -132,11 +132,7 @@ def score(run, B: float) -> dict:
     decided = link_ok & (lab != "ambiguous")
     # a label describes the settled configuration: where the named link touched with its tip
     # and its side at once (a tip on one surface, the side on an edge), either label is right
-    ts = np.asarray(truth.contact_t)
-    te = np.where(np.isfinite(truth.contact_t_end), truth.contact_t_end, ts)
-    at = np.asarray(contacts.t_settle)[:, None]
-    there = ((np.asarray(truth.contact_link)[None] == np.asarray(contacts.link)[:, None])
-             & (ts[None] - TOL <= at) & (at <= te[None] + TOL))
+    there = in_contact_at(contacts.t_settle, contacts.link, truth, tol=TOL)
     there[np.flatnonzero(ok), mi[ok]] = True
     is_tip = np.asarray(truth.is_tip, dtype=bool)[None]
     right = decided & np.where(lab == "tip", (there & is_tip).any(1), (there & ~is_tip).any(1))

@@ -18,6 +18,24 @@ def match_events(contacts: Contacts, truth: GroundTruth, tol: float = 0.05,
                        at=contacts.t_settle, tol=tol, min_duration=min_duration)
 
 
+def _event_spans(truth: GroundTruth, min_duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each true event's ``[start, end]`` (``min_duration`` long where its end is unknown)."""
+    ts = np.asarray(truth.contact_t, dtype=float)
+    te = np.asarray(truth.contact_t_end, dtype=float)
+    return ts, np.where(np.isfinite(te), np.maximum(te, ts), ts + min_duration)
+
+
+def in_contact_at(at: ArrayLike, link: ArrayLike, truth: GroundTruth, tol: float = 0.05,
+                  min_duration: float = 0.05) -> NDArray[np.bool_]:
+    """``(M, E)``: which true events were on each detection's named ``link`` and in contact
+    (within ``tol``) at ``at``, the time it settled — the contacts its configuration
+    measured."""
+    ts, te = _event_spans(truth, min_duration)
+    ta = np.asarray(at, dtype=float).reshape(-1)[:, None]
+    return ((np.asarray(link).reshape(-1)[:, None] == np.asarray(truth.contact_link)[None, :])
+            & (ts[None, :] - tol <= ta) & (ta <= te[None, :] + tol))
+
+
 def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
                 truth: GroundTruth, *, at: ArrayLike | None = None, tol: float = 0.05,
                 min_duration: float = 0.05) -> NDArray[np.int64]:
@@ -58,9 +76,7 @@ def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
         return out
     de = ds if t_end is None else np.asarray(t_end, dtype=float).reshape(-1)
     de = np.where(np.isfinite(de), np.maximum(de, ds), ds)
-    ts = np.asarray(truth.contact_t, dtype=float)
-    te = np.asarray(truth.contact_t_end, dtype=float)
-    te = np.where(np.isfinite(te), np.maximum(te, ts), ts + min_duration)
+    ts, te = _event_spans(truth, min_duration)
     overlap = (np.minimum(de[:, None], te[None, :]) - np.maximum(ds[:, None], ts[None, :])
                + tol)
     feasible = overlap > 0
@@ -73,9 +89,8 @@ def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
         same_link = (np.asarray(link).reshape(-1)[:, None]
                      == np.asarray(truth.contact_link)[None, :])
     measured = np.zeros_like(same_link)
-    if at is not None:
-        ta = np.asarray(at, dtype=float).reshape(-1)[:, None]
-        measured = same_link & (ts[None, :] - tol <= ta) & (ta <= te[None, :] + tol)
+    if at is not None and link is not None:
+        measured = in_contact_at(at, link, truth, tol, min_duration)
         # a detection whose link was in contact where it settled measured that contact: it
         # pairs with it or, when another detection of the same contact has it, with nothing
         # (a repeat), never with a concurrent contact of another link it did not name
