@@ -8,10 +8,12 @@ contacts only (``used_as_tip``) and score again: the paper's claim is that tip +
 alone.
 
 Columns: ``true`` = true surfaces; ``touched`` = surfaces with at least one true contact;
-``dof-cov`` = touched surfaces whose distinct contacts consistent with them as used (true
-surface residual < 1 mm) reach the type's ``dof + 2`` (what fit-and-grow needs to report a
+``dof-cov`` = touched surfaces whose distinct contacts (repeats of one configuration counted
+once, as the fit counts them) consistent with them as used (true surface residual < 1 mm)
+reach the type's ``dof + 2`` (what fit-and-grow needs to report a
 primitive: below it the simulator's coverage is the limit, not the fit); ``det`` = those whose
-consistent contacts also determine the true surface by the report gate's own test, evaluated at
+consistent contacts also determine the true surface by the report gate's own test (links lying
+flat on a flat surface left out of its type test, as the reconstruction does), evaluated at
 the truth (``found/det``: found among them; where the contacts do not determine a surface, no
 fit of them may be reported); ``found`` = touched
 surfaces matched by a primitive of the right type; ``off`` = found surfaces none of whose
@@ -51,7 +53,14 @@ import numpy as np
 from wholearm_tools.contact_table import ContactTable
 from wholearm_tools.contacts import match_events
 from wholearm_tools.fit.models import MODELS
-from wholearm_tools.pipeline import Reconstruction, fit_table, position_noise_floor, reconstruct
+from wholearm_tools.pipeline import (
+    DUPLICATE_TOL,
+    Reconstruction,
+    duplicate_groups,
+    fit_table,
+    position_noise_floor,
+    reconstruct,
+)
 from wholearm_tools.report.metrics import evaluate, true_surfaces, truth_contact_touches
 from wholearm_tools.sim.scenarios import load_scenario
 
@@ -71,9 +80,10 @@ def take_rows(table: ContactTable, rows: np.ndarray) -> ContactTable:
 
 def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     """Per true surface (position index), the distinct detected contacts (one table row per
-    configuration) paired with a true contact that touched it (a corner contact counts for both
-    walls) and consistent with it as the fit uses them: tip or link residual of the true
-    surface below ``tol`` metres."""
+    group of repeats, :func:`wholearm_tools.pipeline.duplicate_groups`, as the fit counts
+    them) paired with a true contact that touched it (a corner contact counts for both walls)
+    and consistent with it as the fit uses them: tip or link residual of the true surface
+    below ``tol`` metres."""
     from wholearm_tools.fit import residuals
     from wholearm_tools.pipeline import fit_data_from_table
 
@@ -82,6 +92,9 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     touches = truth_contact_touches(truth, surfaces, RESOLUTION)
     mi = match_events(rec.contacts, truth)
     table = rec.table
+    # distinct as the reconstruction counts them: repeats of one configuration are one contact
+    floor = position_noise_floor(rec.run.robot, np.asarray(rec.run.log.q))
+    group = duplicate_groups(table, DUPLICATE_TOL * floor)
     out: dict[int, np.ndarray] = {}
     for i, s in enumerate(surfaces):
         rows = np.flatnonzero((mi >= 0) & touches[np.maximum(mi, 0), i])
@@ -91,8 +104,7 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
         data, order = fit_data_from_table(table, rows=rows)
         r = residuals(s.kind, s.params, data, float(s.data.get("free_side", 1)))
         good = order[np.abs(r) < tol]
-        key = np.round(np.hstack([table.tip_center[good], table.seg_a[good]]) / 1e-4)
-        _, first = np.unique(key, axis=0, return_index=True)
+        _, first = np.unique(group[good], return_index=True)
         out[i] = np.sort(good[first])
     return out
 
@@ -110,21 +122,34 @@ def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
     no primitive fitted to them could be reported, however well the fit went."""
     from types import SimpleNamespace
 
-    from wholearm_tools.fit.gate import report_gate
+    from wholearm_tools.fit.gate import lying_flat, report_gate
     from wholearm_tools.fit.policy import FitPolicy
+    from wholearm_tools.fit.readings import readings_from_contacts
     from wholearm_tools.pipeline import fit_data_from_table
 
     policy = FitPolicy()
     surfaces = true_surfaces(rec.run.truth)
     sigma_kin = policy.kinematic_error * float(rec.run.robot.reach)
+    B = float(rec.params.B)
+    t = rec.table
     out: dict[int, bool] = {}
     for i, rows in _consistent(rec, tol).items():
         s = surfaces[i]
-        data, _ = fit_data_from_table(rec.table, rows=rows)
-        true_fit = SimpleNamespace(kind=s.kind, params=s.params,
+        if len(rows) == 0:
+            out[i] = False
+            continue
+        data, order = fit_data_from_table(t, rows=rows)
+        true_fit = SimpleNamespace(kind=s.kind, params=s.params, primitive=s.primitive,
                                    free_side=float(s.data.get("free_side", 1)))
-        out[i] = bool(report_gate(true_fit, data, sigma_kin, policy.max_rel_std,
-                                  B=float(rec.params.B)))
+        # as the pipeline's gate: a link lying flat on a flat surface leaves its point of
+        # touch open and stays out of the type test
+        rd = readings_from_contacts(t.link[order], t.p_tip[order], t.tip_center[order],
+                                    t.tip_radius[order], t.seg_a[order], t.seg_b[order],
+                                    t.link_radius[order])
+        open_touch = lying_flat(true_fit, rd, np.arange(len(order)),
+                                policy.k_sigma * sigma_kin, B)
+        out[i] = bool(report_gate(true_fit, data, sigma_kin, policy.max_rel_std, B=B,
+                                  open_touch=open_touch))
     return out
 
 

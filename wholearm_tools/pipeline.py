@@ -187,6 +187,10 @@ def position_noise_floor(robot: RobotModel, q: NDArray[np.float64]) -> float:
                      DEFAULT_NOISE_FLOOR / 10))
 
 
+#: repeated contacts lie within this many position noise floors of each other (fit_table)
+DUPLICATE_TOL = 3.0
+
+
 def duplicate_groups(table: ContactTable, tol: float) -> NDArray[np.int64]:
     """Group id of each contact: contacts made on the same link, used the same way, in the same
     configuration (tip centre and link axis within ``tol`` metres) share a group, ``(M,) int``.
@@ -248,8 +252,8 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
               ) -> tuple[SurfaceMap, tuple[Any, ...], ContactTable, tuple[str, ...]]:
     """The inference loop over a contact table → (map, fits, table with assignments, messages).
 
-    Repeated contacts (same link, same configuration within ``3 * noise_floor``) are one
-    contact (see :func:`duplicate_groups`) and share its assignment.  Each contact enters as
+    Repeated contacts (same link, same configuration within ``DUPLICATE_TOL * noise_floor``)
+    are one contact (see :func:`duplicate_groups`) and share its assignment.  Each contact enters as
     its readings (:mod:`wholearm_tools.fit.readings`: sphere or side of each candidate link,
     ``candidates`` from :func:`link_candidates`); :func:`wholearm_tools.fit.infer.infer`
     selects the primitives; each is refitted with the robust ``loss`` on its contacts and
@@ -283,7 +287,7 @@ def fit_table(table: ContactTable, *, planar: bool, B: float, kinds: tuple[str, 
                          f"{dim}-D contacts (choose from {', '.join(DEFAULT_KINDS[dim])})")
     messages: list[str] = []
     m_all = len(table)
-    group = (duplicate_groups(table, 3.0 * noise_floor) if merge_duplicates
+    group = (duplicate_groups(table, DUPLICATE_TOL * noise_floor) if merge_duplicates
              else np.arange(m_all))
     _, first = np.unique(group, return_index=True)
     reps = np.sort(first)
