@@ -1,10 +1,10 @@
 """``wholearm demo``: the whole job on the bundled well junction.
 
-simulate ``well_junction`` → write the run as MCAP → read it back as a real log would be →
-reconstruct → every output of ``wholearm reconstruct`` (map.json, contacts.csv,
-report_data.json, meshes, overlay.mcap, report.pdf) beside the run.  The demo owns its output
-folder (default ``reports/demo``) and replaces what it wrote before, as a unit
-(``wholearm_tools.outputs``).
+simulate ``well_junction`` (kinematic engine, or ``--engine physics``) → write the run as
+MCAP → read it back as a real log would be → reconstruct → every output of ``wholearm
+reconstruct`` (map.json, contacts.csv, report_data.json, meshes, overlay.mcap, report.pdf)
+beside the run.  The demo owns its output folder (default ``reports/demo``) and replaces what
+it wrote before, as a unit (``wholearm_tools.outputs``).
 """
 
 from __future__ import annotations
@@ -36,9 +36,14 @@ def _step(message: str) -> float:
               default=None, help="Arm time to simulate [s] (default: the scenario's).")
 @click.option("--B", "B", type=PositiveLength(), default=None,
               help="B [m] (default: the scenario's B hint, else 0.02).")
+@click.option("--engine", type=click.Choice(["kinematic", "physics"]), default="kinematic",
+              show_default=True,
+              help="kinematic: idealised rigid stops; physics: MuJoCo with the scenario's "
+                   "friction, soft contacts, joint friction and torque-limited PD control "
+                   "(the closer stand-in for a rig's log).")
 @json_option
 def command(out_dir: Path, scenario: str, seed: int | None, duration: float | None,
-            B: float | None, as_json: bool) -> None:
+            B: float | None, engine: str, as_json: bool) -> None:
     """Run the whole pipeline on a simulated run and write every deliverable."""
     from wholearm_tools.logs import read_run, write_run
     from wholearm_tools.outputs import OutputSet, reconstruction_names, write_outputs
@@ -50,8 +55,8 @@ def command(out_dir: Path, scenario: str, seed: int | None, duration: float | No
     with OutputSet(out_dir, reconstruction_names({RUN_NAME}), overwrite=True) as out:
         run_path = out.path(RUN_NAME)
         t = _step(f"simulating {sc.name} ({sc.duration if duration is None else duration:g} s "
-                  "of arm time)")
-        sim = sc.simulate(seed=seed, duration=duration)
+                  f"of arm time, {engine} engine)")
+        sim = sc.simulate(seed=seed, duration=duration, engine=engine)
         write_run(run_path, sim.run)
         status(f"  {sim.run.log.n_samples} samples, {sim.truth.n_contacts} true contacts "
                f"({time.perf_counter() - t:.1f} s)")
