@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from wholearm_tools.classify import tip_probability
-from wholearm_tools.contacts import detect_contacts, in_contact_at, match_events
+from wholearm_tools.contacts import arm_stops, detect_contacts, in_contact_at, match_events
 from wholearm_tools.logs import read_run, write_run
 from wholearm_tools.sim.scenarios import list_scenarios, load_scenario
 
@@ -116,11 +116,7 @@ def score(run, B: float) -> dict:
     stopped = np.asarray(truth.contact_stopped, dtype=bool)
     hit = np.zeros(truth.n_contacts, dtype=bool)
     hit[mi[ok]] = True
-    q_true = np.asarray(truth.contact_q)
-    stops: dict[tuple, list[int]] = {}
-    for j in np.flatnonzero(stopped):
-        key = tuple(np.round(q_true[j], 9)) if q_true.shape[1] else (j,)
-        stops.setdefault(key, []).append(int(j))
+    stops = arm_stops(truth)
     true_link = np.where(ok, truth.contact_link[np.maximum(mi, 0)], -1)
     link_ok = ok & (np.asarray(contacts.link) == true_link)
     prior = np.asarray(contacts.link_prior)
@@ -138,7 +134,7 @@ def score(run, B: float) -> dict:
     right = decided & np.where(lab == "tip", (there & is_tip).any(1), (there & ~is_tip).any(1))
     return {"events": truth.n_contacts, "stop": int(stopped.sum()), "det": len(contacts),
             "found": int((hit & stopped).sum()), "paired": int(ok.sum()),
-            "stops": len(stops), "stops_found": sum(bool(hit[g].any()) for g in stops.values()),
+            "stops": len(stops), "stops_found": sum(bool(hit[g].any()) for g in stops),
             "link_ok": int(link_ok.sum()), "in_group": int(in_group.sum()),
             "decided": int(decided.sum()),
             "right": int(right.sum()), "amb": int((link_ok & (lab == "ambiguous")).sum()),

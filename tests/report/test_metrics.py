@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from types import SimpleNamespace
 
@@ -54,6 +55,21 @@ def test_confusion_link_accuracy_and_calibration_counts():
     d = json.loads(json.dumps(m.to_dict()))
     assert d["confusion"]["counts"] == [[2, 1, 0], [0, 1, 1]]
     assert d["calibration"]["tip_fraction"][1] is None        # empty bin → null, not NaN
+
+
+def test_recall_of_the_arms_stops_against_contact():
+    """A physics run records touches that only slowed or deflected the arm, and stops held by
+    two contacts at once; joint positions show each stop once, and the detection recall is
+    of those."""
+    q = np.array([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6], [0.3, 0.4], [0.7, 0.8], [0.9, 1.0]])
+    truth = dataclasses.replace(_truth_6(), contact_q=q,
+                                contact_stopped=np.array([1, 1, 0, 1, 0, 1], dtype=bool))
+    t = [1.02, 3.02, 4.02, 5.02, 10.0]          # contact 2 missed but its stop held by 4 too
+    m = classification_metrics(t, [2, 0, 2, 2, 0], [0.9, 0.05, 0.5, 0.95, 0.8],
+                               ["tip", "link", "ambiguous", "tip", "tip"], truth)
+    assert (m.n_stopped, m.n_stops, m.n_stops_found) == (4, 3, 2)   # contact 6's stop missed
+    assert m.stop_recall == pytest.approx(2 / 3)
+    assert json.loads(json.dumps(m.to_dict()))["stop_recall"] == pytest.approx(2 / 3)
 
 
 def test_classification_metrics_rejects_bad_input():

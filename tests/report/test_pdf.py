@@ -49,6 +49,15 @@ def test_report_with_truth_opens_with_the_answer(planar_rec, tmp_path):
     assert lines[0] == f"{n} surface{'s' if n > 1 else ''} found (± = 95 % interval):"
     text = "\n".join(lines)
     assert "Against the simulator's ground truth" in text
+    c = info.accuracy.classification
+    if c.n_stopped == c.n_truth:        # a kinematic run: every contact stopped the arm
+        assert f"{c.n_matched} of {c.n_truth} true contacts detected" in text
+    # a physics run's touches that did not stop the arm are said apart from its stops
+    slid = dataclasses.replace(info.accuracy, classification=dataclasses.replace(
+        c, n_stopped=c.n_truth - 2, n_stops=c.n_truth - 3, n_stops_found=c.n_truth - 4))
+    assert (f"{c.n_truth - 4} of the arm's {c.n_truth - 3} stops against contact detected "
+            f"({c.n_truth - 2} true contacts held them, 2 more touches did not stop it;"
+            ) in "\n".join(report_pdf.summary_lines(data, slid, None)).replace("\n  ", " ")
     assert "Torque evidence: commanded torques (command topic)" in text
     assert f"B = {planar_rec.params.B:g} m" in text
     assert "Written by wholearm_tools" in text

@@ -5,7 +5,7 @@ from wholearm_tools.contacts.detect import (
     DetectionParams,
     detect_contacts,
 )
-from wholearm_tools.contacts.truth import in_contact_at, match_events, pair_events
+from wholearm_tools.contacts.truth import arm_stops, in_contact_at, match_events, pair_events
 
-__all__ = ["Contacts", "DetectionParams", "detect_contacts", "in_contact_at", "match_events",
-           "pair_events"]
+__all__ = ["Contacts", "DetectionParams", "arm_stops", "detect_contacts", "in_contact_at",
+           "match_events", "pair_events"]

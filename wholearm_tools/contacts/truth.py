@@ -36,6 +36,23 @@ def in_contact_at(at: ArrayLike, link: ArrayLike, truth: GroundTruth, tol: float
             & (ts[None, :] - tol <= ta) & (ta <= te[None, :] + tol))
 
 
+def arm_stops(truth: GroundTruth) -> list[NDArray[np.int64]]:
+    """The arm's stops against contact: the true events that stopped it, grouped by the
+    configuration they settled in (the arm can be held by two contacts at once, and one
+    configuration shows one stop).  A stop is detected when a detection pairs with any of its
+    events."""
+    stopped = np.flatnonzero(np.asarray(truth.contact_stopped, dtype=bool))
+    q = np.asarray(truth.contact_q, dtype=float)
+    if len(stopped) == 0:
+        return []
+    if q.ndim != 2 or q.shape[1] == 0:
+        return [np.array([j]) for j in stopped]
+    _, group = np.unique(np.round(q[stopped], 9), axis=0, return_inverse=True)
+    group = np.asarray(group).reshape(-1)
+    return sorted((stopped[group == g] for g in range(int(group.max()) + 1)),
+                  key=lambda events: int(events[0]))
+
+
 def pair_events(t: ArrayLike, t_end: ArrayLike | None, link: ArrayLike | None,
                 truth: GroundTruth, *, at: ArrayLike | None = None, tol: float = 0.05,
                 min_duration: float = 0.05) -> NDArray[np.int64]:

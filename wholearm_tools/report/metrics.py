@@ -86,6 +86,11 @@ class ClassificationMetrics:
     n_detected, n_truth, n_matched : int
     n_false : int, detections without a true contact
     n_missed : int, true contacts without a detection
+    n_stopped : int, true contacts that stopped the arm (every one on the kinematic engine; a
+        physics run also records touches that only slowed or deflected it)
+    n_stops, n_stops_found : int, the arm's stops against contact
+        (:func:`wholearm_tools.contacts.arm_stops`: the contacts that held one configuration)
+        and those a detection paired with
     truth_index : (M,) int, paired truth contact of each detection, -1 none
     link_correct : int, paired contacts whose detected link is the true link
     confusion : (2, 3) int, rows truth ``tip|joint``, ``body``; columns predicted
@@ -100,6 +105,9 @@ class ClassificationMetrics:
     n_matched: int
     n_false: int
     n_missed: int
+    n_stopped: int
+    n_stops: int
+    n_stops_found: int
     truth_index: NDArray[np.int64]
     link_correct: int
     confusion: NDArray[np.int64]
@@ -116,6 +124,12 @@ class ClassificationMetrics:
     def link_accuracy(self) -> float:
         """Fraction of paired contacts on the right link (NaN when none paired)."""
         return self.link_correct / self.n_matched if self.n_matched else float("nan")
+
+    @property
+    def stop_recall(self) -> float:
+        """Fraction of the arm's stops against contact that a detection found (what joint
+        positions can show; NaN when nothing stopped it)."""
+        return self.n_stops_found / self.n_stops if self.n_stops else float("nan")
 
     @property
     def n_decided(self) -> int:
@@ -136,6 +150,9 @@ class ClassificationMetrics:
         return _json({
             "n_detected": self.n_detected, "n_truth": self.n_truth,
             "n_matched": self.n_matched, "n_false": self.n_false, "n_missed": self.n_missed,
+            "n_stopped": self.n_stopped, "n_stops": self.n_stops,
+            "n_stops_found": self.n_stops_found,
+            "stop_recall": self.stop_recall,
             "link_accuracy": self.link_accuracy, "class_accuracy": self.class_accuracy,
             "ambiguous_fraction": self.ambiguous_fraction,
             "confusion": {"rows": list(self.ROWS), "columns": list(self.COLUMNS),
@@ -161,7 +178,7 @@ def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any
         (:func:`wholearm_tools.contacts.pair_events`)
     bins : increasing P_T bin edges from 0 to 1 for the calibration
     """
-    from wholearm_tools.contacts.truth import pair_events
+    from wholearm_tools.contacts.truth import arm_stops, pair_events
 
     t = np.asarray(t, dtype=float).reshape(-1)
     m = t.shape[0]
@@ -197,9 +214,14 @@ def classification_metrics(t: Any, link: Any, p_tip: Any, label: Any, truth: Any
         frac = np.bincount(which, weights=y, minlength=k) / count
     brier = float(np.mean((p - y) ** 2)) if p.size else float("nan")
     n_matched = int(ok.sum())
+    stops = arm_stops(truth)
+    paired = np.zeros(int(truth.n_contacts), dtype=bool)
+    paired[j] = True
     return ClassificationMetrics(
         n_detected=m, n_truth=int(truth.n_contacts), n_matched=n_matched,
         n_false=m - n_matched, n_missed=int(truth.n_contacts) - n_matched,
+        n_stopped=int(np.count_nonzero(truth.contact_stopped)), n_stops=len(stops),
+        n_stops_found=sum(bool(paired[g].any()) for g in stops),
         truth_index=read_only(idx, np.int64), link_correct=int(np.sum(link[ok] == true_link)),
         confusion=read_only(confusion, np.int64), bins=read_only(edges),
         bin_count=read_only(count, np.int64),

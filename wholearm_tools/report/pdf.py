@@ -111,6 +111,17 @@ def fmt_pm(value: float, half: float | None, *, scale: float = 1.0, unit: str = 
     return f"{_num(value * scale, dec)} ± {_sig2(abs(half) * scale)}{unit}"
 
 
+def _detected(c: Any) -> str:
+    """How many true contacts were detected: where some did not stop the arm (a physics run's
+    slides and grazes, which joint positions cannot show), of the arm's stops against
+    contact, with the contacts that held them and the touches that did not said apart."""
+    if c.n_stopped == c.n_truth:
+        return f"{c.n_matched} of {c.n_truth} true contacts detected ({c.n_false} false)"
+    return (f"{c.n_stops_found} of the arm's {c.n_stops} stops against contact detected "
+            f"({c.n_stopped} true contacts held them, {c.n_truth - c.n_stopped} more touches "
+            f"did not stop it; {c.n_false} false detections)")
+
+
 def _pct(x: float) -> str:
     return f"{100 * x:.0f} %" if math.isfinite(x) else "n/a"
 
@@ -296,8 +307,7 @@ def summary_lines(data: Any, accuracy: AccuracyReport | None,
                      f"{tool.get('version', '')} on {meta.get('created', '?')}")
     if accuracy is not None:
         c = accuracy.classification
-        lines += ["", "Against the simulator's ground truth: "
-                  f"{c.n_matched} of {c.n_truth} true contacts detected ({c.n_false} false); "
+        lines += ["", "Against the simulator's ground truth: " + _detected(c) + "; "
                   f"link right {_pct(c.link_accuracy)}; tip/link right "
                   f"{_pct(c.class_accuracy)} of decided ({_pct(c.ambiguous_fraction)} "
                   f"ambiguous); {accuracy.n_found} of {len(accuracy.surfaces)} true surfaces "
@@ -1028,6 +1038,8 @@ def _accuracy_blocks(flow: _Flow, acc: AccuracyReport) -> None:
         f"paired                   {c.n_matched}",
         f"false detections         {c.n_false}",
         f"missed true contacts     {c.n_missed}",
+        f"stops of the arm found   {c.n_stops_found} of {c.n_stops} "
+        f"(held by {c.n_stopped} contacts)",
         f"link identified right    {_pct(c.link_accuracy)} ({c.link_correct}/{c.n_matched})",
         f"tip/link labels right    {_pct(c.class_accuracy)} of {c.n_decided} decided",
         f"ambiguous                {_pct(c.ambiguous_fraction)}",
