@@ -65,8 +65,10 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
                                 if cmd else "no"))
     out.append("torque:    " + _torque_line(info["torque_sources"]))
     gt = info["ground_truth"]
-    out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body),"
-                                f" {gt['surfaces']} surfaces" if gt else "no"))
+    slid = (f", {gt['stopped']} stopped the arm"
+            if gt and gt.get("stopped", gt["contacts"]) < gt["contacts"] else "")
+    out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body"
+                                f"{slid}), {gt['surfaces']} surfaces" if gt else "no"))
     found = info["contacts_found"]
     if found is not None:
         if "error" in found:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -46,6 +48,13 @@ def test_inspect_written_run(tmp_path, run):
     assert result.exit_code == 0
     assert json.loads(result.output)["ground_truth"]["by_kind"] == {"body": 1, "joint": 1,
                                                                     "tip": 1}
+    # a physics run's truth also lists touches that did not stop the arm: said apart
+    slid = dataclasses.replace(run, truth=dataclasses.replace(
+        run.truth, contact_stopped=np.array([True, False, True])))
+    write_run(path, slid, profile="json")
+    assert inspect_log(path)["ground_truth"]["stopped"] == 2
+    result = CliRunner().invoke(command, [str(path)])
+    assert "truth:     3 contacts (2 tip, 1 body, 2 stopped the arm), 1 surfaces" in result.output
 
 
 def test_inspect_errors_are_log_format_errors(tmp_path):

@@ -126,6 +126,7 @@ def inspect_log(path: str | os.PathLike[str], *, joint_topic: str | None = None
         kinds = parsed.contact_kind.tolist()
         truth = {"contacts": parsed.n_contacts, "tip": int(parsed.is_tip.sum()),
                  "body": int((~parsed.is_tip).sum()),
+                 "stopped": int(np.count_nonzero(parsed.contact_stopped)),
                  "by_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
                  "surfaces": len(parsed.surfaces),
                  "surface_types": [str(s.get("type", "?")) for s in parsed.surfaces]}
