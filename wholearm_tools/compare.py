@@ -18,7 +18,10 @@ Row fields (``None`` where not applicable, e.g. every truth field of a real log)
 ``tip`` / ``link`` / ``ambiguous`` contacts per class (they add up to ``contacts``) ·
 ``unexplained`` contacts no primitive explains · ``primitives`` count · ``types`` e.g.
 ``"circle=1;line=3"`` · ``truth_contacts`` ground-truth contacts · ``matched`` /
-``false_detections`` detections paired / not paired with a truth contact · ``link_accuracy`` ·
+``false_detections`` detections paired / not paired with a truth contact · ``stops`` /
+``stops_found`` the arm's stops against contact (a physics run's truth also lists touches that
+did not stop it; :func:`wholearm_tools.contacts.arm_stops`) and those detected ·
+``link_accuracy`` ·
 ``class_accuracy`` (over decided labels) and ``ambiguous_fraction`` of eq. (2)'s labels,
 ``class_accuracy_map`` / ``ambiguous_fraction_map`` of the labels refined by the fitted map ·
 ``surfaces_touched`` / ``surfaces_found`` /
@@ -62,15 +65,15 @@ OUTPUT_NAMES = ("comparison.csv", "comparison.json", "comparison.pdf")
 #: fixed leading and trailing columns; per-type error columns go in between
 LEADING_COLUMNS = (
     "log", "B", "status", "contacts", "tip", "link", "ambiguous", "unexplained", "primitives",
-    "types", "truth_contacts", "matched", "false_detections", "link_accuracy", "class_accuracy",
-    "ambiguous_fraction", "class_accuracy_map", "ambiguous_fraction_map",
-    "surfaces_touched", "surfaces_found", "surfaces_missed",
+    "types", "truth_contacts", "matched", "false_detections", "stops", "stops_found",
+    "link_accuracy", "class_accuracy", "ambiguous_fraction", "class_accuracy_map",
+    "ambiguous_fraction_map", "surfaces_touched", "surfaces_found", "surfaces_missed",
 )
 TRAILING_COLUMNS = ("wall_time_s", "error", "messages", "path")
 
 #: ground-truth columns (None for real logs)
-TRUTH_COLUMNS = ("truth_contacts", "matched", "false_detections", "link_accuracy",
-                 "class_accuracy", "ambiguous_fraction", "class_accuracy_map",
+TRUTH_COLUMNS = ("truth_contacts", "matched", "false_detections", "stops", "stops_found",
+                 "link_accuracy", "class_accuracy", "ambiguous_fraction", "class_accuracy_map",
                  "ambiguous_fraction_map", "surfaces_touched", "surfaces_found",
                  "surfaces_missed")
 
@@ -290,6 +293,8 @@ def truth_errors(rec: Any) -> dict[str, Any]:
         "truth_contacts": cls.n_truth,
         "matched": cls.n_matched,
         "false_detections": cls.n_false,
+        "stops": cls.n_stops,
+        "stops_found": cls.n_stops_found,
         "link_accuracy": cls.link_accuracy,
         "class_accuracy": cls.class_accuracy,
         "ambiguous_fraction": cls.ambiguous_fraction,

@@ -18,6 +18,7 @@ from wholearm_tools.compare import (
     comparison_row,
     write_comparison,
 )
+from wholearm_tools.contacts import arm_stops
 from wholearm_tools.errors import InputError
 
 
@@ -52,6 +53,9 @@ def test_counts_add_up_to_detected_contacts(local_table: ComparisonTable,
             # simulated runs carry ground truth: every truth column is scored
             assert row["truth_contacts"] == run.truth.n_contacts
             assert row["matched"] + row["false_detections"] == row["contacts"]
+            # the arm's stops against contact, and how many a detection found
+            assert row["stops"] == len(arm_stops(run.truth)) > 0
+            assert 0 < row["stops_found"] <= row["stops"]
             assert 0.0 <= row["link_accuracy"] <= 1.0
             assert row["surfaces_found"] + row["surfaces_missed"] == row["surfaces_touched"]
             assert row["wall_time_s"] > 0
