@@ -109,13 +109,17 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     return out
 
 
-def coverage(rec: Reconstruction, tol: float = 1e-3) -> dict[int, int]:
+def coverage(rec: Reconstruction, tol: float = 1e-3,
+             consistent: dict[int, np.ndarray] | None = None) -> dict[int, int]:
     """Distinct detected contacts per true surface (position index) that are consistent with it
-    as the fit uses them (tip or link residual of the true surface below ``tol`` metres)."""
-    return {i: len(rows) for i, rows in _consistent(rec, tol).items()}
+    as the fit uses them (tip or link residual of the true surface below ``tol`` metres;
+    ``consistent``: :func:`_consistent`'s rows, when already computed)."""
+    rows = _consistent(rec, tol) if consistent is None else consistent
+    return {i: len(r) for i, r in rows.items()}
 
 
-def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
+def determined(rec: Reconstruction, tol: float = 1e-3,
+               consistent: dict[int, np.ndarray] | None = None) -> dict[int, bool]:
     """Whether each true surface's consistent contacts (:func:`coverage`) determine it by the
     report gate's own test (:func:`wholearm_tools.fit.gate.report_gate`, at the stated
     kinematic error of the default policy), evaluated at the true surface: where they do not,
@@ -133,7 +137,7 @@ def determined(rec: Reconstruction, tol: float = 1e-3) -> dict[int, bool]:
     B = float(rec.params.B)
     t = rec.table
     out: dict[int, bool] = {}
-    for i, rows in _consistent(rec, tol).items():
+    for i, rows in (_consistent(rec, tol) if consistent is None else consistent).items():
         s = surfaces[i]
         if len(rows) == 0:
             out[i] = False
@@ -260,8 +264,9 @@ def main() -> None:
             rec = reconstruct(run, B=B, workers=1, learn_compliance=args.learn_compliance,
                               learn_backlash=args.learn_backlash)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-            cov = coverage(rec)
-            det = determined(rec)
+            consistent = _consistent(rec, 1e-3)
+            cov = coverage(rec, consistent=consistent)
+            det = determined(rec, consistent=consistent)
             both = score(rec, cov, det)
             both["cpu"] = cpu
             t1 = time.perf_counter()

@@ -66,7 +66,7 @@ def command(run: Path, as_json: bool, joint_topic: str | None) -> None:
     out.append("torque:    " + _torque_line(info["torque_sources"]))
     gt = info["ground_truth"]
     slid = (f", {gt['stopped']} stopped the arm"
-            if gt and gt.get("stopped", gt["contacts"]) < gt["contacts"] else "")
+            if gt and gt["stopped"] < gt["contacts"] else "")
     out.append("truth:     " + (f"{gt['contacts']} contacts ({gt['tip']} tip, {gt['body']} body"
                                 f"{slid}), {gt['surfaces']} surfaces" if gt else "no"))
     found = info["contacts_found"]

@@ -45,7 +45,7 @@ def arm_stops(truth: GroundTruth) -> list[NDArray[np.int64]]:
     q = np.asarray(truth.contact_q, dtype=float)
     if len(stopped) == 0:
         return []
-    if q.ndim != 2 or q.shape[1] == 0:
+    if q.shape[1] == 0:         # no configurations recorded: each event its own stop
         return [np.array([j]) for j in stopped]
     _, group = np.unique(np.round(q[stopped], 9), axis=0, return_inverse=True)
     group = np.asarray(group).reshape(-1)
