@@ -66,7 +66,8 @@ def seeds_arg(text: str) -> list[int]:
 
 
 def get_run(name: str, seed: int, args: argparse.Namespace):
-    """The run, simulated (or read back from ``--cache``, keyed by every parameter)."""
+    """The run, simulated (or read back from ``--cache``, keyed by every parameter; a physics
+    run cached by another MuJoCo release is simulated again)."""
     sc = load_scenario(name)
     physics = None
     tag = f"{name}_{seed}_{args.engine}_{args.duration or 'd'}"
@@ -87,9 +88,14 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
         physics = dataclasses.replace(physics, **changes)
         tag += "_" + "_".join(f"{k}{v}" for k, v in sorted(changes.items()))
     path = Path(args.cache) / f"{tag}.mcap" if args.cache else None
-    if path is not None and path.exists():
-        run = read_run(path)
-    else:
+    run = read_run(path) if path is not None and path.exists() else None
+    if run is not None and args.engine == "physics":
+        import mujoco
+
+        # another MuJoCo release integrates the same scenario and seed to another run
+        if (run.truth.meta if run.truth is not None else {}).get("mujoco") != mujoco.__version__:
+            run = None
+    if run is None:
         kw = {"physics": physics} if physics is not None else {}
         run = sc.simulate(seed=seed, duration=args.duration, rate=args.rate, engine=args.engine,
                           **kw).run
