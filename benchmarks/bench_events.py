@@ -93,7 +93,7 @@ def get_run(name: str, seed: int, args: argparse.Namespace):
         import mujoco
 
         # another MuJoCo release integrates the same scenario and seed to another run
-        if (run.truth.meta if run.truth is not None else {}).get("mujoco") != mujoco.__version__:
+        if run.truth is None or run.truth.meta.get("mujoco") != mujoco.__version__:
             run = None
     if run is None:
         kw = {"physics": physics} if physics is not None else {}

@@ -109,18 +109,14 @@ def _consistent(rec: Reconstruction, tol: float) -> dict[int, np.ndarray]:
     return out
 
 
-def coverage(rec: Reconstruction, tol: float = 1e-3,
-             consistent: dict[int, np.ndarray] | None = None) -> dict[int, int]:
+def coverage(consistent: dict[int, np.ndarray]) -> dict[int, int]:
     """Distinct detected contacts per true surface (position index) that are consistent with it
-    as the fit uses them (tip or link residual of the true surface below ``tol`` metres;
-    ``consistent``: :func:`_consistent`'s rows, when already computed)."""
-    rows = _consistent(rec, tol) if consistent is None else consistent
-    return {i: len(r) for i, r in rows.items()}
+    as the fit uses them (:func:`_consistent`'s rows)."""
+    return {i: len(r) for i, r in consistent.items()}
 
 
-def determined(rec: Reconstruction, tol: float = 1e-3,
-               consistent: dict[int, np.ndarray] | None = None) -> dict[int, bool]:
-    """Whether each true surface's consistent contacts (:func:`coverage`) determine it by the
+def determined(rec: Reconstruction, consistent: dict[int, np.ndarray]) -> dict[int, bool]:
+    """Whether each true surface's consistent contacts (:func:`_consistent`) determine it by the
     report gate's own test (:func:`wholearm_tools.fit.gate.report_gate`, at the stated
     kinematic error of the default policy), evaluated at the true surface: where they do not,
     no primitive fitted to them could be reported, however well the fit went."""
@@ -137,7 +133,7 @@ def determined(rec: Reconstruction, tol: float = 1e-3,
     B = float(rec.params.B)
     t = rec.table
     out: dict[int, bool] = {}
-    for i, rows in (_consistent(rec, tol) if consistent is None else consistent).items():
+    for i, rows in consistent.items():
         s = surfaces[i]
         if len(rows) == 0:
             out[i] = False
@@ -157,15 +153,13 @@ def determined(rec: Reconstruction, tol: float = 1e-3,
     return out
 
 
-def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool] | None = None
-          ) -> dict:
+def score(rec: Reconstruction, cov: dict[int, int], det: dict[int, bool]) -> dict:
     ev = evaluate(rec)
     surfaces = true_surfaces(rec.run.truth)
     touched = [s for s in ev.surfaces if s.touched]
     enough = [s for i, s in enumerate(ev.surfaces)
               if cov[i] >= MODELS[surfaces[i].kind].dof + 2]
     found = [s for s in ev.surfaces if s.touched and s.found]
-    det = det if det is not None else determined(rec)
     determinable = [i for i, s in enumerate(ev.surfaces) if det.get(i, False)]
     good = [a for a in ev.primitives if a.type_correct]
     by_id = {a.primitive_id: a for a in ev.primitives}
@@ -265,8 +259,8 @@ def main() -> None:
                               learn_backlash=args.learn_backlash)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             consistent = _consistent(rec, 1e-3)
-            cov = coverage(rec, consistent=consistent)
-            det = determined(rec, consistent=consistent)
+            cov = coverage(consistent)
+            det = determined(rec, consistent)
             both = score(rec, cov, det)
             both["cpu"] = cpu
             t1 = time.perf_counter()
